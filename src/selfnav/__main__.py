@@ -1,0 +1,3 @@
+from selfnav.cli import main
+
+main()

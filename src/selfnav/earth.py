@@ -1,0 +1,176 @@
+"""Earth model: ellipsoids, normal gravity, radii of curvature, Earth rate, geodetic <-> ECEF.
+
+Implements DESIGN §2 (constants) and §7 (gravity). Everything is SI and radians; arrays broadcast.
+
+References
+----------
+NIMA TR8350.2 (WGS-84), eq. 4-1 (Somigliana) and 4-3 (height term);
+GOST 32453-2017 (PZ-90.11); Krasovsky 1940 ellipsoid (SK-42).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+#: Earth rotation rate, rad/s (WGS-84 / PZ-90.11 value, DESIGN §2).
+OMEGA_EARTH = 7.292115e-5
+
+
+@dataclass(frozen=True)
+class Ellipsoid:
+    """Reference ellipsoid with the normal-gravity constants of its datum.
+
+    Attributes
+    ----------
+    name : str
+    a : float
+        Semi-major axis, m.
+    inv_f : float
+        Inverse flattening.
+    gamma_e, gamma_p : float
+        Normal gravity at the equator and at the pole, m/s^2 (Somigliana).
+    gm : float
+        Geocentric gravitational constant, m^3/s^2 (for the height term).
+    omega : float
+        Rotation rate, rad/s.
+    """
+
+    name: str
+    a: float
+    inv_f: float
+    gamma_e: float
+    gamma_p: float
+    gm: float = 3.986004418e14
+    omega: float = OMEGA_EARTH
+
+    @property
+    def f(self) -> float:
+        return 1.0 / self.inv_f
+
+    @property
+    def b(self) -> float:
+        return self.a * (1.0 - self.f)
+
+    @property
+    def e2(self) -> float:
+        """First eccentricity squared."""
+        return self.f * (2.0 - self.f)
+
+    @property
+    def k_somigliana(self) -> float:
+        return (self.b * self.gamma_p) / (self.a * self.gamma_e) - 1.0
+
+    @property
+    def m(self) -> float:
+        """omega^2 a^2 b / GM (TR8350.2)."""
+        return self.omega**2 * self.a**2 * self.b / self.gm
+
+
+WGS84 = Ellipsoid("WGS-84", 6378137.0, 298.257223563, 9.7803253359, 9.8321849378)
+# PZ-90.11: gamma_e from GOST 32453 (DESIGN §2); gamma_p is not in the digest, so the WGS-84
+# value stands in (the two normal fields differ by well under 1 mGal at the pole).
+PZ90 = Ellipsoid("PZ-90.11", 6378136.0, 298.25784, 9.78032836, 9.8321849378)
+# Krasovsky 1940 is a geometric datum here (SK-42 coordinates); its gravity constants are WGS-84's.
+KRASOVSKY = Ellipsoid("Krasovsky 1940", 6378245.0, 298.3, 9.7803253359, 9.8321849378)
+
+#: The seed 004 (4) rounded Somigliana constants (reads 18-33 mGal low; DESIGN §7).
+SEED004_GAMMA_E = 9.780
+SEED004_GAMMA_P = 9.832
+
+
+def normal_gravity(lat, h=0.0, ellipsoid: Ellipsoid = WGS84, *, seed_constants: bool = False):
+    """Normal gravity magnitude, m/s^2.
+
+    Somigliana's closed form on the ellipsoid (TR8350.2 eq. 4-1; seed 004 (4)) with the
+    second-order height term of TR8350.2 eq. 4-3.
+
+    Parameters
+    ----------
+    lat : array_like
+        Geodetic latitude, rad.
+    h : array_like
+        Height above the ellipsoid, m.
+    ellipsoid : Ellipsoid
+    seed_constants : bool
+        Use seed 004's rounded gamma_e = 9.780, gamma_p = 9.832 (for reproducing the seed only).
+    """
+    lat = np.asarray(lat, dtype=float)
+    h = np.asarray(h, dtype=float)
+    ell = ellipsoid
+    ge, gp = (SEED004_GAMMA_E, SEED004_GAMMA_P) if seed_constants else (ell.gamma_e, ell.gamma_p)
+    k = (ell.b * gp) / (ell.a * ge) - 1.0
+    s2 = np.sin(lat) ** 2
+    g0 = ge * (1.0 + k * s2) / np.sqrt(1.0 - ell.e2 * s2)
+    # TR8350.2 eq. 4-3
+    corr = 1.0 - 2.0 / ell.a * (1.0 + ell.f + ell.m - 2.0 * ell.f * s2) * h + 3.0 / ell.a**2 * h**2
+    return g0 * corr
+
+
+def radii(lat, h=0.0, ellipsoid: Ellipsoid = WGS84):
+    """Meridian and prime-vertical radii of curvature plus height, m.
+
+    Returns ``(R_phi, R_lambda)`` as in seed 004 §3, fast-loop step 2:
+    ``R_phi = a(1-e^2)/(1-e^2 sin^2 phi)^{3/2} + h``, ``R_lambda = a/(1-e^2 sin^2 phi)^{1/2} + h``.
+    """
+    lat = np.asarray(lat, dtype=float)
+    e2 = ellipsoid.e2
+    w = np.sqrt(1.0 - e2 * np.sin(lat) ** 2)
+    rn = ellipsoid.a / w
+    rm = ellipsoid.a * (1.0 - e2) / w**3
+    return rm + h, rn + h
+
+
+def earth_rate_n(lat, omega: float = OMEGA_EARTH):
+    """Earth rate in the ENU navigation frame, ``(0, Ω cos φ, Ω sin φ)`` (seed 000 (1.5))."""
+    lat = np.asarray(lat, dtype=float)
+    z = np.zeros_like(lat)
+    return np.stack([z, omega * np.cos(lat), omega * np.sin(lat)], axis=-1)
+
+
+def geodetic_to_ecef(lat, lon, h=0.0, ellipsoid: Ellipsoid = WGS84):
+    """Geodetic (rad, rad, m) to ECEF (m), shape ``(..., 3)``."""
+    lat = np.asarray(lat, dtype=float)
+    lon = np.asarray(lon, dtype=float)
+    h = np.asarray(h, dtype=float)
+    e2 = ellipsoid.e2
+    rn = ellipsoid.a / np.sqrt(1.0 - e2 * np.sin(lat) ** 2)
+    x = (rn + h) * np.cos(lat) * np.cos(lon)
+    y = (rn + h) * np.cos(lat) * np.sin(lon)
+    z = (rn * (1.0 - e2) + h) * np.sin(lat)
+    return np.stack(np.broadcast_arrays(x, y, z), axis=-1)
+
+
+def ecef_to_geodetic(xyz, ellipsoid: Ellipsoid = WGS84, *, iterations: int = 5):
+    """ECEF (m) to geodetic ``(lat, lon, h)`` (rad, rad, m) by fixed-point iteration.
+
+    Seed 004 notes that the inverse needs iteration; five iterations of the Bowring-started
+    update reach well below a micrometre for terrestrial heights.
+    """
+    xyz = np.asarray(xyz, dtype=float)
+    x, y, z = xyz[..., 0], xyz[..., 1], xyz[..., 2]
+    a, e2 = ellipsoid.a, ellipsoid.e2
+    b = ellipsoid.b
+    ep2 = (a**2 - b**2) / b**2
+    p = np.hypot(x, y)
+    lon = np.arctan2(y, x)
+    # Bowring's initial value
+    th = np.arctan2(z * a, p * b)
+    lat = np.arctan2(z + ep2 * b * np.sin(th) ** 3, p - e2 * a * np.cos(th) ** 3)
+    for _ in range(iterations):
+        rn = a / np.sqrt(1.0 - e2 * np.sin(lat) ** 2)
+        h = np.where(np.abs(np.cos(lat)) > 1e-9, p / np.maximum(np.cos(lat), 1e-300) - rn,
+                     np.abs(z) / np.maximum(np.abs(np.sin(lat)), 1e-300) - rn * (1 - e2))
+        lat = np.arctan2(z, p * (1.0 - e2 * rn / (rn + h)))
+    rn = a / np.sqrt(1.0 - e2 * np.sin(lat) ** 2)
+    cl = np.cos(lat)
+    h = np.where(np.abs(cl) > 1e-9, p / np.where(np.abs(cl) > 1e-9, cl, 1.0) - rn,
+                 np.abs(z) - rn * (1 - e2))
+    return lat, lon, h
+
+
+def enu_basis(lat, lon):
+    """Rows are the East, North, Up unit vectors in ECEF: the matrix ``C_e^n`` (ECEF -> ENU)."""
+    sl, cl = np.sin(lat), np.cos(lat)
+    so, co = np.sin(lon), np.cos(lon)
+    return np.array([[-so, co, 0.0], [-sl * co, -sl * so, cl], [cl * co, cl * so, sl]])

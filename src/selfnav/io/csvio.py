@@ -1,0 +1,199 @@
+"""Native CSV files (DESIGN §6): header row, ``#`` comments, extra columns kept and ignored.
+
+Reading validates shape and values and names the line and column of the first problem; writing
+goes to a temporary file in the target folder that is moved into place, so nothing is left
+half-written.
+"""
+from __future__ import annotations
+
+import difflib
+import gzip
+import io
+import os
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from selfnav.errors import InputError
+
+
+def _open_text(path: Path) -> str:
+    try:
+        raw = path.read_bytes()
+    except FileNotFoundError:
+        raise InputError(path, "no such file") from None
+    except IsADirectoryError:
+        raise InputError(path, "is a folder, not a file") from None
+    except OSError as e:
+        raise InputError(path, f"cannot be read ({e.strerror})") from None
+    if path.suffix == ".gz" or raw[:2] == b"\x1f\x8b":
+        try:
+            raw = gzip.decompress(raw)
+        except OSError:
+            raise InputError(path, "looks gzip-compressed but cannot be decompressed") from None
+    try:
+        return raw.decode("utf-8-sig")
+    except UnicodeDecodeError:
+        raise InputError(path, "is not a text file (not UTF-8): is it a binary log?") from None
+
+
+def read_table(path, required, optional=(), *, numeric=True):
+    """Read a CSV table with a header row.
+
+    Parameters
+    ----------
+    path : str or Path
+    required : sequence of str
+        Column names that must be present (case-insensitive, surrounding spaces ignored).
+    optional : sequence of str
+        Column names returned when present.
+
+    Returns
+    -------
+    dict
+        ``{name: float64 array}`` for the required and present optional columns; the key
+        ``"_lines"`` holds the 1-based file line number of each data row.
+    """
+    path = Path(path)
+    text = _open_text(path)
+    lines = text.splitlines()
+    header_idx = None
+    for i, line in enumerate(lines):
+        s = line.strip()
+        if s and not s.startswith("#"):
+            header_idx = i
+            break
+    if header_idx is None:
+        raise InputError(path, "is empty (no header row and no data)")
+    header_line = lines[header_idx]
+    delim = "," if "," in header_line else None
+    names = [h.strip().lower() for h in (header_line.split(delim) if delim else header_line.split())]
+    try:
+        float(names[0])
+        raise InputError(path, "the first line holds numbers, not column names: add a header row "
+                         f"({', '.join(required)})", row=header_idx + 1)
+    except ValueError:
+        pass
+    index = {}
+    for k, n in enumerate(names):
+        index.setdefault(n, k)
+    for col in required:
+        if col not in index:
+            close = difflib.get_close_matches(col, names, n=1, cutoff=0.6)
+            hint = f" (found '{close[0]}': misnamed?)" if close else ""
+            raise InputError(path, f"missing column '{col}'{hint}; the header has: "
+                             f"{', '.join(names)}", row=header_idx + 1)
+    wanted = list(required) + [c for c in optional if c in index]
+    data_lines = []
+    line_no = []
+    for i in range(header_idx + 1, len(lines)):
+        s = lines[i].strip()
+        if s and not s.startswith("#"):
+            data_lines.append(lines[i])
+            line_no.append(i + 1)
+    if not data_lines:
+        raise InputError(path, "has a header but no data rows")
+    line_no = np.asarray(line_no)
+    ncol = len(names)
+    usecols = [index[c] for c in wanted]
+    try:
+        arr = np.loadtxt(io.StringIO("\n".join(data_lines)), delimiter=delim, usecols=usecols,
+                         ndmin=2, comments="#", dtype=float)
+    except ValueError:
+        arr = None
+    if arr is None or arr.shape[0] != len(data_lines):
+        # find the first offending row for a precise message
+        for k, line in enumerate(data_lines):
+            parts = [p.strip() for p in (line.split(delim) if delim else line.split())]
+            if len(parts) < ncol and max(usecols) >= len(parts):
+                raise InputError(path, f"has {len(parts)} fields where the header has {ncol}",
+                                 row=int(line_no[k]))
+            for c in wanted:
+                v = parts[index[c]]
+                try:
+                    float(v)
+                except ValueError:
+                    raise InputError(path, f"value '{v[:20]}' is not a number", row=int(line_no[k]),
+                                     column=c) from None
+        raise InputError(path, "cannot be parsed as a numeric CSV table")
+    out = {}
+    for j, c in enumerate(wanted):
+        col = arr[:, j]
+        bad = ~np.isfinite(col)
+        if bad.any():
+            k = int(np.argmax(bad))
+            raise InputError(path, f"value {col[k]} (NaN or infinite): remove or repair the row",
+                             row=int(line_no[k]), column=c)
+        out[c] = np.ascontiguousarray(col)
+    out["_lines"] = line_no
+    out["_path"] = str(path)
+    return out
+
+
+def check_time(table, column="t", *, min_rows=1):
+    """Check that the time column is strictly increasing; name the first offending row."""
+    path = table["_path"]
+    t = table[column]
+    if len(t) < min_rows:
+        raise InputError(path, f"has {len(t)} data rows; at least {min_rows} are needed")
+    d = np.diff(t)
+    if np.any(d <= 0):
+        k = int(np.argmax(d <= 0)) + 1
+        kind = "repeated" if d[k - 1] == 0 else "going backwards (unsorted)"
+        raise InputError(path, f"time {t[k]!r} is {kind}: samples must be strictly increasing",
+                         row=int(table["_lines"][k]), column=column)
+    return t
+
+
+def write_csv(path, columns: dict, *, comments=(), fmt="%.10g"):
+    """Write named columns to ``path`` atomically (temporary file moved into place).
+
+    Parameters
+    ----------
+    path : str or Path
+    columns : dict
+        ``{name: 1-D array}`` in output order, all the same length.
+    comments : sequence of str
+        Lines written first, each prefixed with ``# ``.
+    fmt : str or dict
+        printf format, or a ``{name: format}`` mapping.
+    """
+    path = Path(path)
+    names = list(columns)
+    arrs = [np.asarray(columns[n]) for n in names]
+    n = {len(a) for a in arrs}
+    if len(n) > 1:
+        raise ValueError(f"columns of different lengths: {dict(zip(names, map(len, arrs)))}")
+    fmts = [fmt.get(k, "%.10g") if isinstance(fmt, dict) else fmt for k in names]
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w", newline="\n") as fh:
+            for c in comments:
+                fh.write(f"# {c}\n")
+            fh.write(",".join(names) + "\n")
+            if arrs and len(arrs[0]):
+                np.savetxt(fh, np.column_stack(arrs), delimiter=",", fmt=fmts)
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+    return path
+
+
+def atomic_write_bytes(path, data: bytes):
+    """Write bytes to ``path`` through a temporary file moved into place."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(data)
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+    return path
