@@ -1,9 +1,9 @@
 """Static and multi-position IMU records (seed 000 §3), exact at rest, with optional errors.
 
 At rest ``ω_ib^b = C_n^b Ω_n(φ)`` and ``f^b = C_n^b (0, 0, γ(φ, h))`` (seed 000 (2.2)-(2.3)).
-A *disturbed* rest (people moving in a vehicle, wind on a mast) is a small body rotation
-``α(t)`` about body axes, ``C_b^n(t) = C_b^n(0) exp([α(t)])``; its exact body rate is
-``J_r(α) α̇`` with the right Jacobian of SO(3), so that the gyros and the accelerometers agree.
+A *disturbed* rest (people moving in a vehicle, wind on a mast) is a small rotation ``β(t)``
+about navigation-frame axes, ``C_b^n(t) = exp([β(t)]) C_b^n(0)``; its exact rate is
+``ω_nb^n = J_l(β) β̇`` with the left Jacobian of SO(3), so that gyros and accelerometers agree.
 """
 from __future__ import annotations
 
@@ -14,8 +14,8 @@ from selfnav.earth import earth_rate_n, normal_gravity
 from selfnav.io.imu import ImuData
 
 
-def _right_jacobian(a):
-    """Right Jacobian of SO(3): ``ω_body = J_r(α) α̇`` for ``C = C0 exp([α])``."""
+def _left_jacobian(a):
+    """Left Jacobian of SO(3): ``ω_nav = J_l(β) β̇`` for ``C = exp([β]) C0``."""
     th2 = np.sum(a * a, axis=-1)
     th = np.sqrt(th2)
     small = th < 1e-5
@@ -23,11 +23,11 @@ def _right_jacobian(a):
     c1 = np.where(small, 0.5 - th2 / 24.0, (1.0 - np.cos(ths)) / ths**2)
     c2 = np.where(small, 1.0 / 6.0 - th2 / 120.0, (ths - np.sin(ths)) / ths**3)
     K = att.skew(a)
-    return np.eye(3) - c1[..., None, None] * K + c2[..., None, None] * (K @ K)
+    return np.eye(3) + c1[..., None, None] * K + c2[..., None, None] * (K @ K)
 
 
 def rocking(t, amplitude=np.radians(0.05), period=3.0, drift=np.radians(0.2), rng=None):
-    """A disturbance ``α(t)`` and its rate: oscillations about x and y plus a slow tilt drift.
+    """A disturbance ``β(t)`` and its rate: oscillations about East and North plus a tilt drift.
 
     Parameters
     ----------
@@ -71,7 +71,7 @@ def static_imu(lat, duration, dt=0.01, *, roll=0.0, pitch=0.0, heading=0.0, h=0.
     gyro_bias, accel_bias : (3,)
         Constant biases in body axes, rad/s and m/s².
     disturbance : callable, optional
-        ``f(t) -> (α, α̇)`` small body rotation (see :func:`rocking`).
+        ``f(t) -> (β, β̇)`` small rotation about nav axes (see :func:`rocking`).
     seed : int, optional
     """
     rng = np.random.default_rng(seed)
@@ -85,8 +85,9 @@ def static_imu(lat, duration, dt=0.01, *, roll=0.0, pitch=0.0, heading=0.0, h=0.
         f = np.tile(C0 @ g_n, (n, 1))
     else:
         a, ad = disturbance(t)
-        C_nb = np.swapaxes(att.rotvec_to_dcm(a), -1, -2) @ C0  # (C0^T exp[α])^T
-        w = C_nb @ om_n + np.einsum("nij,nj->ni", _right_jacobian(a), ad)
+        C_nb = C0 @ np.swapaxes(att.rotvec_to_dcm(a), -1, -2)  # (exp[β] C0^T)^T
+        w_nb_n = np.einsum("nij,nj->ni", _left_jacobian(a), ad)
+        w = C_nb @ om_n + np.einsum("nij,nj->ni", C_nb, w_nb_n)
         f = C_nb @ g_n
     w = w + np.asarray(gyro_bias) + rng.normal(size=(n, 3)) * np.asarray(arw) / np.sqrt(dt)
     f = f + np.asarray(accel_bias) + rng.normal(size=(n, 3)) * np.asarray(vrw) / np.sqrt(dt)
