@@ -30,6 +30,8 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
+from numba import njit
+
 from selfnav import attitude as att
 from selfnav.earth import OMEGA_EARTH, normal_gravity
 from selfnav.errors import InputError, NotAtRestError, SelfnavError
@@ -223,11 +225,48 @@ class LatitudeResult:
         return d
 
 
+@njit(cache=True)
+def _rest_stats(w, f, dt):  # pragma: no cover - compiled
+    """One pass for the means, then one for the largest gyro-integrated excursion from the mean.
+
+    Returns ``(w_mean, f_mean, w_var, fnorm_mean, fnorm_var, max_excursion)``.
+    """
+    n = w.shape[0]
+    sw = np.zeros(3)
+    sf = np.zeros(3)
+    sww = np.zeros(3)
+    sfn = 0.0
+    sfn2 = 0.0
+    for k in range(n):
+        for i in range(3):
+            sw[i] += w[k, i]
+            sf[i] += f[k, i]
+            sww[i] += w[k, i] * w[k, i]
+        fn = np.sqrt(f[k, 0] ** 2 + f[k, 1] ** 2 + f[k, 2] ** 2)
+        sfn += fn
+        sfn2 += fn * fn
+    wm = sw / n
+    fm = sf / n
+    wv = sww / n - wm * wm
+    fnm = sfn / n
+    fnv = sfn2 / n - fnm * fnm
+    a0, a1, a2 = 0.0, 0.0, 0.0
+    exc = 0.0
+    for k in range(n):
+        a0 += (w[k, 0] - wm[0]) * dt
+        a1 += (w[k, 1] - wm[1]) * dt
+        a2 += (w[k, 2] - wm[2]) * dt
+        e = a0 * a0 + a1 * a1 + a2 * a2
+        if e > exc:
+            exc = e
+    return wm, fm, wv, fnm, fnv, np.sqrt(exc)
+
+
 def _check_at_rest(imu, path):
     """Refuse wrong gyro units and data that are not at rest; return the plain means."""
     n = len(imu)
-    w_mean = imu.omega_ib_b.mean(axis=0)
-    f_mean = imu.f_ib_b.mean(axis=0)
+    w_mean, f_mean, w_var, _, fn_var, exc = _rest_stats(
+        np.ascontiguousarray(imu.omega_ib_b), np.ascontiguousarray(imu.f_ib_b), imu.dt)
     ratio = np.linalg.norm(w_mean) / OMEGA_EARTH
     if 30.0 < ratio < 90.0:
         raise InputError(path, f"mean gyro rate is {ratio:.1f} × Earth rate: the gyros look like "
@@ -235,15 +274,11 @@ def _check_at_rest(imu, path):
     if 1.0e5 < ratio < 4.0e5:
         raise InputError(path, f"mean gyro rate is {ratio:.3g} × Earth rate: the gyros look like "
                          "deg/h, the file needs rad/s", column="wx")
-    w_std = imu.omega_ib_b.std(axis=0)
-    noise_allow = 5.0 * np.linalg.norm(w_std) / np.sqrt(max(n, 1))
+    noise_allow = 5.0 * np.sqrt(np.sum(np.clip(w_var, 0, None))) / np.sqrt(max(n, 1))
     if np.linalg.norm(w_mean) > 5.0 * OMEGA_EARTH + noise_allow:
         raise NotAtRestError(f"{path}: not at rest: the mean gyro rate is {ratio:.1f} × Earth rate "
                              f"({np.linalg.norm(w_mean) / DEG_PER_H:.4g} °/h); the unit is turning "
                              "(or the gyros are not in rad/s)")
-    # rotation accumulated by the gyros after removing their mean
-    ang = np.cumsum(imu.omega_ib_b - w_mean, axis=0) * imu.dt
-    exc = float(np.max(np.linalg.norm(ang - ang[0], axis=1)))
     if exc > 5.0 * DEG:
         raise NotAtRestError(f"{path}: not at rest: the gyros show the unit turning by "
                              f"{np.degrees(exc):.1f}° during the record")
@@ -254,8 +289,7 @@ def _check_at_rest(imu, path):
     if tilt > 5.0 * DEG:
         raise NotAtRestError(f"{path}: not at rest: the gravity direction changed by "
                              f"{np.degrees(tilt):.1f}° between the start and end of the record")
-    fn = np.linalg.norm(imu.f_ib_b, axis=1)
-    rms_dev = float(np.sqrt(np.mean((fn - fn.mean()) ** 2)))
+    rms_dev = float(np.sqrt(max(fn_var, 0.0)))
     if rms_dev > 2.0:
         raise NotAtRestError(f"{path}: not at rest: |f| varies by {rms_dev:.2f} m/s² RMS "
                              "(the unit is accelerating)")
@@ -274,44 +308,137 @@ def _tilt_series(f_b, f_ref_unit):
     return np.cross(fh, f_ref_unit)
 
 
-def _jackknife(values_full, values_deleted):
-    """Delete-one-block jackknife standard error, vectorized over trailing dims."""
-    m = values_deleted.shape[0]
-    mean = values_deleted.mean(axis=0)
-    var = (m - 1) / m * np.sum((values_deleted - mean) ** 2, axis=0)
-    return np.sqrt(var)
+@njit(cache=True)
+def _gyro_attitude(omega, dt):  # pragma: no cover - compiled
+    """Cumulative attitude ``q_k = C_{b_k}^{b_0}`` (inertial) from rates, scalar-first quaternions.
+
+    Rotation-vector update with the two-sample coning correction
+    ``φ_k = ω_k Δt + (ω_{k−1} Δt × ω_k Δt) / 12``; ``q[0]`` is the identity, ``q[k]`` follows
+    sample ``k − 1``. Summing rates instead would turn rocking (coning) into a false rate.
+    """
+    n = omega.shape[0]
+    q = np.empty((n + 1, 4))
+    q[0, 0], q[0, 1], q[0, 2], q[0, 3] = 1.0, 0.0, 0.0, 0.0
+    px, py, pz = 0.0, 0.0, 0.0
+    for k in range(n):
+        ax, ay, az = omega[k, 0] * dt[k], omega[k, 1] * dt[k], omega[k, 2] * dt[k]
+        cx = (py * az - pz * ay) / 12.0
+        cy = (pz * ax - px * az) / 12.0
+        cz = (px * ay - py * ax) / 12.0
+        rx, ry, rz = ax + cx, ay + cy, az + cz
+        px, py, pz = ax, ay, az
+        th = np.sqrt(rx * rx + ry * ry + rz * rz)
+        if th < 1e-3:  # series: error below th^6 / 46080
+            t2 = th * th
+            c, s = 1.0 - t2 / 8.0 + t2 * t2 / 384.0, 0.5 - t2 / 48.0 + t2 * t2 / 3840.0
+        else:
+            c, s = np.cos(th / 2.0), np.sin(th / 2.0) / th
+        dw, dx, dy, dz = c, rx * s, ry * s, rz * s
+        w0, x0, y0, z0 = q[k, 0], q[k, 1], q[k, 2], q[k, 3]
+        w1 = w0 * dw - x0 * dx - y0 * dy - z0 * dz
+        x1 = w0 * dx + x0 * dw + y0 * dz - z0 * dy
+        y1 = w0 * dy - x0 * dz + y0 * dw + z0 * dx
+        z1 = w0 * dz + x0 * dy - y0 * dx + z0 * dw
+        nrm = np.sqrt(w1 * w1 + x1 * x1 + y1 * y1 + z1 * z1)
+        q[k + 1, 0], q[k + 1, 1], q[k + 1, 2], q[k + 1, 3] = w1 / nrm, x1 / nrm, y1 / nrm, z1 / nrm
+    return q
+
+
+def _quat_conj(q):
+    return q * np.array([1.0, -1.0, -1.0, -1.0])
+
+
+def _sample_intervals(imu):
+    return np.diff(imu.t, prepend=imu.t[0] - imu.dt)
+
+
+def _batch_cov(x, m):
+    """Covariance of a sum from its ``m`` block contributions ``x`` (rows), batch-means style."""
+    return (x.T @ x) * m / max(m - 1, 1)
 
 
 def _rate_estimates(imu, lab, n_blocks, compensate):
-    """Mean rate (plain or tilt-compensated) for the full record and each block deletion.
+    """Earth rate in body axes, mean specific force, and their covariances from the data.
 
-    Returns ``(w_full, f_full, w_del, f_del)`` with ``w_del`` of shape ``(n_blocks, 3)``.
+    ``still``: the rotation vector of each block's gyro-integrated attitude (coning-free), summed
+    over the blocks and divided by the time. ``compensate``: the tilt ``a(t)`` seen by the
+    accelerometers is taken out of the gyro attitude, ``Z(t) = R(t) exp(−[a(t)])``, and the Earth
+    rate is the least-squares slope of ``Y(t) = rotvec(Ẑ_0ᵀ Z(t))`` (``Ẑ_0`` absorbs the initial
+    tilt). The slope is a weighted sum of the increments of Y; its covariance is the sum over
+    blocks of the weighted residual increments (a batch-means estimate that stays valid for the
+    random-walk character of Y and for slowly correlated noise).
+
+    Returns ``(w, cov_w, f, cov_f)``.
     """
     w, f = imu.omega_ib_b, imu.f_ib_b
+    dt = _sample_intervals(imu)
     cnt = np.bincount(lab, minlength=n_blocks).astype(float)
     f_sum = np.stack([np.bincount(lab, f[:, k], n_blocks) for k in range(3)], 1)
     f_full = f_sum.sum(0) / cnt.sum()
-    f_del = (f_sum.sum(0) - f_sum) / (cnt.sum() - cnt)[:, None]
+    fb = f_sum / cnt[:, None]
+    cov_f = _batch_cov((fb - f_full) * (cnt / cnt.sum())[:, None], n_blocks)
+    q = _gyro_attitude(np.ascontiguousarray(w), np.ascontiguousarray(dt))
     if not compensate:
-        w_sum = np.stack([np.bincount(lab, w[:, k], n_blocks) for k in range(3)], 1)
-        return w_sum.sum(0) / cnt.sum(), f_full, (w_sum.sum(0) - w_sum) / (cnt.sum() - cnt)[:, None], f_del
-    # least-squares slope of Y(t) = ∫ω dt − θ_tilt(t): the rate with the tilt changes removed
-    dt = np.diff(imu.t, prepend=imu.t[0] - imu.dt)
-    G = np.cumsum(w * dt[:, None], axis=0)
-    Y = G - _tilt_series(f, f_full / np.linalg.norm(f_full))
+        edges = np.concatenate([[0], np.cumsum(np.bincount(lab, minlength=n_blocks))])
+        rho = att.quat_to_rotvec(att.quat_multiply(_quat_conj(q[edges[:-1]]), q[edges[1:]]))
+        Tb = np.bincount(lab, dt, n_blocks)
+        w_full = rho.sum(0) / Tb.sum()
+        cov_w = _batch_cov((rho - np.outer(Tb, w_full)) / Tb.sum(), n_blocks)
+        return w_full, cov_w, f_full, cov_f
+    f_ref = f_full / np.linalg.norm(f_full)
+    a = _tilt_series(f, f_ref)
+    Z = att.quat_multiply(q[1:], _quat_conj(att.rotvec_to_quat(a)))
     t = imu.t - imu.t[0]
-    S = lambda x: np.bincount(lab, x, n_blocks)  # noqa: E731
-    St, Stt = S(t), S(t * t)
-    SY = np.stack([S(Y[:, k]) for k in range(3)], 1)
-    StY = np.stack([S(t * Y[:, k]) for k in range(3)], 1)
+    c = (t - t.mean()) / np.sum((t - t.mean()) ** 2)  # slope = Σ c_k Y_k
+    Z0 = Z[0]
+    for _ in range(3):  # Ẑ_0 = mean of Z(t) exp(−[ω t]), then the slope again
+        Y = att.quat_to_rotvec(att.quat_multiply(_quat_conj(Z0), Z))
+        w_full = c @ Y
+        qe = att.quat_multiply(Z, _quat_conj(att.rotvec_to_quat(t[:, None] * w_full)))
+        qe = qe * np.sign(qe @ qe[0])[:, None]
+        Z0 = qe.mean(0)
+        Z0 = Z0 / np.linalg.norm(Z0)
+    # Noise of Y: a random walk (gyro noise, density q) plus white noise (tilt noise, σ_w²).
+    # The tilt noise hides the random walk at short lags, so fit the structure function of the
+    # L-sample moving average of Y at lag L (the modified-Allan idea): D(L) ≈ (2/3) q L Δt + 2σ_w²/L.
+    # The slope is Σ_i W_i ΔY_i with W_i = Σ_{k≥i} c_k: var = q Σ W_i² Δt_i + σ_w² Σ c_k².
+    n = len(t)
+    dtm = float(np.mean(np.diff(t)))
+    resid = Y - t[:, None] * w_full
+    cs = np.vstack([np.zeros(3), np.cumsum(resid, axis=0)])
+    lags = np.unique(np.geomspace(1, max(n // 8, 2), 20).astype(int))
+    D = []
+    for L in lags:
+        ma = (cs[L:] - cs[:-L]) / L
+        D.append(np.mean((ma[L:] - ma[:-L]) ** 2, axis=0))
+    D = np.array(D)
+    A = np.column_stack([2.0 / 3.0 * lags * dtm, 2.0 / lags])
+    W = np.cumsum(c[::-1])[::-1][1:]
+    sW2 = np.sum(W * W * np.diff(t))
+    var = np.empty(3)
+    for k in range(3):
+        wts = 1.0 / D[:, k]
+        sol, *_ = np.linalg.lstsq(A * wts[:, None], D[:, k] * wts, rcond=None)
+        qd, sw2 = max(sol[0], 0.0), max(sol[1], 0.0)
+        var[k] = qd * sW2 + sw2 * np.sum(c * c)
+    cov_w = np.diag(var)
+    return w_full, cov_w, f_full, cov_f
 
-    def slope(n, st, stt, sy, sty):
-        n, st, stt = (np.asarray(v, dtype=float)[..., None] for v in (n, st, stt))
-        return (n * sty - st * sy) / (n * stt - st * st)
 
-    w_full = slope(cnt.sum(), St.sum(), Stt.sum(), SY.sum(0), StY.sum(0))
-    w_del = slope(cnt.sum() - cnt, St.sum() - St, Stt.sum() - Stt, SY.sum(0) - SY, StY.sum(0) - StY)
-    return w_full, f_full, w_del, f_del
+def _delta_sigma(fn, x, cov, eps=1e-7):
+    """Standard deviation of ``fn(x)`` by the delta method with a numerical gradient."""
+    x = np.asarray(x, dtype=float)
+    f0 = fn(x)
+    grad = np.empty(len(x))
+    for i in range(len(x)):
+        h = eps * max(abs(x[i]), 1e-12) if x[i] != 0 else eps
+        xp = x.copy()
+        xp[i] += h
+        d = fn(xp) - f0
+        if np.ndim(d) == 0 and abs(d) > np.pi:  # angle wrap
+            d = np.angle(np.exp(1j * d))
+        grad[i] = d / h
+    return float(np.sqrt(max(grad @ cov @ grad, 0.0)))
 
 
 def _tilt_change(imu, lab, n_blocks):
@@ -321,15 +448,15 @@ def _tilt_change(imu, lab, n_blocks):
     f = imu.f_ib_b
     fr = f.mean(0)
     fr = fr / np.linalg.norm(fr)
-    th = _tilt_series(f, fr)
-    d = th[-m:].mean(0) - th[:m].mean(0)
+    th0, th1 = _tilt_series(f[:m], fr), _tilt_series(f[-m:], fr)
+    d = th1.mean(0) - th0.mean(0)
     # noise of the tilt means from the scatter of 10 sub-means in each tenth
     def se(x):
         k = max(min(10, len(x) // 2), 2)
         sub = np.array([c.mean(0) for c in np.array_split(x, k)])
         return sub.std(0, ddof=1) / np.sqrt(k)
 
-    s = np.sqrt(se(th[:m]) ** 2 + se(th[-m:]) ** 2)
+    s = np.sqrt(se(th0) ** 2 + se(th1) ** 2)
     return d, s
 
 
@@ -369,30 +496,27 @@ def estimate_latitude(imu, *, method: str = "optimal", rest: str = "auto", h: fl
     tilt_mag = float(np.linalg.norm(dtilt))
     tilt_sig = float(np.linalg.norm(dtilt_s))
     compensate = rest == "disturbed" or (rest == "auto" and tilt_mag > 4.0 * tilt_sig)
-    w_full, f_full, w_del, f_del = _rate_estimates(imu, lab, nb, compensate)
+    w_full, cov_w, f_full, cov_f = _rate_estimates(imu, lab, nb, compensate)
     warnings = []
     if compensate:
         warnings.append(f"disturbed rest: the tilt changed by {np.degrees(tilt_mag) * 3600:.0f}″ "
                         f"({tilt_mag / max(tilt_sig, 1e-300):.0f}σ) during the record; the gyro "
-                        "mean was compensated with the accelerometer tilt")
-
-    if method == "seed":
-        fn = latitude_seed
-    else:
-        fn = latitude_angle
+                        "attitude was compensated with the accelerometer tilt")
+    fn = latitude_seed if method == "seed" else latitude_angle
+    x = np.concatenate([w_full, f_full])
+    cov = np.zeros((6, 6))
+    cov[:3, :3], cov[3:, 3:] = cov_w, cov_f
     lat = float(fn(w_full, f_full))
-    lat_del = fn(w_del, f_del)
-    sigma_noise = float(_jackknife(lat, lat_del))
+    sigma_noise = _delta_sigma(lambda v: float(fn(v[:3], v[3:])), x, cov)
     C_nb = att.triad_nb(f_full, w_full)
-    roll, pitch, heading = (float(x) for x in att.euler_from_dcm_nb(C_nb))
-    hd = att.euler_from_dcm_nb(att.triad_nb(f_del, w_del))[2]
-    hd = np.angle(np.exp(1j * (hd - heading)))
-    sig_heading = float(_jackknife(0.0, hd))
+    roll, pitch, heading = (float(v) for v in att.euler_from_dcm_nb(C_nb))
+    sig_heading = _delta_sigma(lambda v: float(att.euler_from_dcm_nb(att.triad_nb(v[3:], v[:3]))[2]),
+                               x, cov)
 
     # honest sigma: widen for sensor errors the noise cannot explain
     wnorm = float(np.linalg.norm(w_full))
     ratio = wnorm / OMEGA_EARTH
-    ratio_sig = float(_jackknife(ratio, np.linalg.norm(w_del, axis=1) / OMEGA_EARTH))
+    ratio_sig = float(np.sqrt(w_full @ cov_w @ w_full)) / wnorm / OMEGA_EARTH
     hh = imu.meta.get("h0_m", 0.0) if h is None else h
     g_normal = float(normal_gravity(lat, hh))
     gratio = float(np.linalg.norm(f_full) / g_normal)
@@ -483,12 +607,12 @@ def estimate_latitude_multiposition(imu, *, gyro_bias_prior: float = 1.0 * DEG_P
         n = len(part)
         nb = max(min(20, n // 50), 2)
         lab = _blocks(n, nb)
-        w_full, f_full, w_del, f_del = _rate_estimates(part, lab, nb, False)
+        w_full, cov_w, f_full, cov_f = _rate_estimates(part, lab, nb, False)
         W.append(w_full)
         F.append(f_full)
         # per-axis standard errors from the block scatter, floored by the white-noise value
-        SW.append(np.maximum(_jackknife(w_full, w_del), part.omega_ib_b.std(0) / np.sqrt(n)))
-        SF.append(np.maximum(_jackknife(f_full, f_del), part.f_ib_b.std(0) / np.sqrt(n)))
+        SW.append(np.maximum(np.sqrt(np.diag(cov_w)), part.omega_ib_b.std(0) / np.sqrt(n)))
+        SF.append(np.maximum(np.sqrt(np.diag(cov_f)), part.f_ib_b.std(0) / np.sqrt(n)))
         parts.append(part)
     W, F, SW, SF = map(np.asarray, (W, F, SW, SF))
     lat0 = float(np.median(latitude_angle(W, F)))

@@ -7,13 +7,14 @@ import math
 import numpy as np
 
 
-def _clean(o):
+def jsonable(o):
+    """Plain-Python copy of ``o`` for JSON (arrays to lists, NaN/inf to None)."""
     if isinstance(o, dict):
-        return {str(k): _clean(v) for k, v in o.items()}
+        return {str(k): jsonable(v) for k, v in o.items()}
     if isinstance(o, (list, tuple)):
-        return [_clean(v) for v in o]
+        return [jsonable(v) for v in o]
     if isinstance(o, np.ndarray):
-        return _clean(o.tolist())
+        return jsonable(o.tolist())
     if isinstance(o, (np.floating, float)):
         v = float(o)
         return v if math.isfinite(v) else None
@@ -26,4 +27,4 @@ def _clean(o):
 
 def emit_json(obj) -> None:
     """Print one JSON object on stdout (NaN and inf become null)."""
-    print(json.dumps(_clean(obj), indent=2, sort_keys=False))
+    print(json.dumps(jsonable(obj), indent=2, sort_keys=False))

@@ -38,6 +38,30 @@ def _open_text(path: Path) -> str:
         raise InputError(path, "is not a text file (not UTF-8): is it a binary log?") from None
 
 
+class _LineNumbers:
+    """1-based file line number of each data row, worked out only when someone asks."""
+
+    def __init__(self, body: str, first_line: int):
+        self._body, self._first, self._arr = body, first_line, None
+
+    def _array(self):
+        if self._arr is None:
+            nums = [self._first + i for i, ln in enumerate(self._body.split("\n"))
+                    if ln.strip() and not ln.lstrip().startswith("#")]
+            self._arr = np.asarray(nums, dtype=int)
+        return self._arr
+
+    def __getitem__(self, k):
+        return self._array()[k]
+
+    def __len__(self):
+        return len(self._array())
+
+    def __array__(self, dtype=None, copy=None):
+        a = self._array()
+        return a if dtype is None else a.astype(dtype)
+
+
 def read_table(path, required, optional=(), *, numeric=True):
     """Read a CSV table with a header row.
 
@@ -53,20 +77,24 @@ def read_table(path, required, optional=(), *, numeric=True):
     -------
     dict
         ``{name: float64 array}`` for the required and present optional columns; the key
-        ``"_lines"`` holds the 1-based file line number of each data row.
+        ``"_lines"`` gives the 1-based file line number of each data row (indexable).
     """
     path = Path(path)
     text = _open_text(path)
-    lines = text.splitlines()
-    header_idx = None
-    for i, line in enumerate(lines):
-        s = line.strip()
+    pos, line_no = 0, 0
+    header_line = None
+    while pos < len(text):
+        nl = text.find("\n", pos)
+        nl = len(text) if nl < 0 else nl
+        s = text[pos:nl].strip()
+        line_no += 1
+        pos = nl + 1
         if s and not s.startswith("#"):
-            header_idx = i
+            header_line = s
             break
-    if header_idx is None:
+    if header_line is None:
         raise InputError(path, "is empty (no header row and no data)")
-    header_line = lines[header_idx]
+    header_idx = line_no - 1
     delim = "," if "," in header_line else None
     names = [h.strip().lower() for h in (header_line.split(delim) if delim else header_line.split())]
     try:
@@ -85,48 +113,46 @@ def read_table(path, required, optional=(), *, numeric=True):
             raise InputError(path, f"missing column '{col}'{hint}; the header has: "
                              f"{', '.join(names)}", row=header_idx + 1)
     wanted = list(required) + [c for c in optional if c in index]
-    data_lines = []
-    line_no = []
-    for i in range(header_idx + 1, len(lines)):
-        s = lines[i].strip()
-        if s and not s.startswith("#"):
-            data_lines.append(lines[i])
-            line_no.append(i + 1)
-    if not data_lines:
+    body = text[pos:] if pos <= len(text) else ""
+    lines = _LineNumbers(body, header_idx + 2)
+    if not body.strip() or all(not ln.strip() or ln.lstrip().startswith("#")
+                               for ln in body.split("\n", 50)[:50]) and len(lines) == 0:
         raise InputError(path, "has a header but no data rows")
-    line_no = np.asarray(line_no)
     ncol = len(names)
     usecols = [index[c] for c in wanted]
     try:
-        arr = np.loadtxt(io.StringIO("\n".join(data_lines)), delimiter=delim, usecols=usecols,
-                         ndmin=2, comments="#", dtype=float)
+        arr = np.loadtxt(io.StringIO(body), delimiter=delim, usecols=usecols, ndmin=2,
+                         comments="#", dtype=float)
     except ValueError:
         arr = None
-    if arr is None or arr.shape[0] != len(data_lines):
+    if arr is None:
         # find the first offending row for a precise message
+        data_lines = [ln for ln in body.split("\n") if ln.strip() and not ln.lstrip().startswith("#")]
         for k, line in enumerate(data_lines):
             parts = [p.strip() for p in (line.split(delim) if delim else line.split())]
             if len(parts) < ncol and max(usecols) >= len(parts):
                 raise InputError(path, f"has {len(parts)} fields where the header has {ncol}",
-                                 row=int(line_no[k]))
+                                 row=int(lines[k]))
             for c in wanted:
                 v = parts[index[c]]
                 try:
                     float(v)
                 except ValueError:
-                    raise InputError(path, f"value '{v[:20]}' is not a number", row=int(line_no[k]),
+                    raise InputError(path, f"value '{v[:20]}' is not a number", row=int(lines[k]),
                                      column=c) from None
         raise InputError(path, "cannot be parsed as a numeric CSV table")
+    if arr.shape[0] == 0:
+        raise InputError(path, "has a header but no data rows")
     out = {}
+    bad_rows = ~np.isfinite(arr)
     for j, c in enumerate(wanted):
         col = arr[:, j]
-        bad = ~np.isfinite(col)
-        if bad.any():
-            k = int(np.argmax(bad))
+        if bad_rows[:, j].any():
+            k = int(np.argmax(bad_rows[:, j]))
             raise InputError(path, f"value {col[k]} (NaN or infinite): remove or repair the row",
-                             row=int(line_no[k]), column=c)
+                             row=int(lines[k]), column=c)
         out[c] = np.ascontiguousarray(col)
-    out["_lines"] = line_no
+    out["_lines"] = lines
     out["_path"] = str(path)
     return out
 

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
@@ -46,9 +47,9 @@ class ImuData:
     def __len__(self) -> int:
         return len(self.t)
 
-    @property
+    @cached_property
     def dt(self) -> float:
-        """Median sample interval, s."""
+        """Median sample interval, s (computed once)."""
         return float(np.median(np.diff(self.t))) if len(self.t) > 1 else float("nan")
 
     @property
