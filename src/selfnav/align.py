@@ -1,0 +1,382 @@
+"""Initial alignment of a strapdown INS (DESIGN §5; seed 004 needs ``K, θ, ψ(0)`` for (1)).
+
+Three steps, used as the data allow:
+
+``coarse_align``
+    Static coarse alignment: roll, pitch and heading (and the latitude, if it is not known) from
+    the mean gyro and accelerometer vectors of a record at rest, by the seed 000 estimator
+    :func:`selfnav.latitude.estimate_latitude` (gyrocompassing with tilt compensation).
+``fine_align``
+    Static fine alignment: least squares on the velocity-error growth. The record is integrated
+    by the strapdown mechanization (:mod:`selfnav.strapdown`, height held) from the coarse
+    attitude; at rest the true velocity is zero, so the computed velocity *is* the error. Its
+    growth over blocks of ``block`` seconds is fitted with the linear static error model
+    (ENU, ψ-angle form)::
+
+        δv̇_E = −g φ_N + 2Ω sinφ δv_N + ∇_E        φ̇_E = −Ω cosφ φ_U + Ω sinφ φ_N − δv_N/R_φ − ε_E
+        δv̇_N =  g φ_E − 2Ω sinφ δv_E + ∇_N        φ̇_N = −Ω sinφ φ_E + δv_E/R_λ − ε_N
+                                                  φ̇_U =  Ω cosφ φ_E + δv_E tanφ/R_λ − ε_U
+
+    for the initial attitude error φ and constant biases ∇, ε (nav axes), with Gaussian priors on
+    all of them, by generalized least squares: the angle random walk makes the block errors
+    correlated (a Wiener-process covariance), the velocity random walk adds white noise. The
+    maximum a-posteriori estimate and its covariance give the attitude and its sigma (a misfit
+    beyond the noise scales the covariance up). Tilt and accelerometer bias,
+    heading and East gyro bias are not separable at rest (tilt ≈ ∇/g, heading ≈ ε_E/(Ω cosφ)):
+    the priors decide the split and the sigmas say so. A second pass removes the
+    linearization error.
+``align_in_motion``
+    For a vehicle: heading from the GNSS course once the speed exceeds a threshold, roll and
+    pitch from the specific force, both by one TRIAD — the body forward axis is along the GNSS
+    velocity and the measured specific force equals ``a^n − g^n`` from the GNSS acceleration.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.linalg import expm, solve_triangular
+
+from selfnav import attitude as att
+from selfnav.earth import OMEGA_EARTH, normal_gravity, radii
+from selfnav.errors import SelfnavError
+from selfnav.latitude import estimate_latitude
+from selfnav.strapdown import integrate_imu
+
+DEG = np.pi / 180.0
+DEG_PER_H = DEG / 3600.0
+G_STD = 9.80665
+
+
+@dataclass
+class Alignment:
+    """An initial attitude (and, in motion, velocity) for the strapdown INS.
+
+    Attributes
+    ----------
+    t : float
+        Time the attitude refers to, s.
+    C_nb : (3, 3)
+        Nav ENU -> body RFU.
+    roll, pitch, heading : float
+        Euler angles of ``C_nb``, rad (DESIGN §2).
+    sigma : (3,)
+        1-σ attitude uncertainty about East, North, Up (tilts and heading), rad; NaN if unknown.
+    method : str
+    latitude : float or None
+        rad (estimated by the coarse alignment when not given).
+    velocity_n : (3,)
+        ENU velocity at ``t`` (zero at rest).
+    details : dict
+        Method-specific values (bias combinations, residuals, the attitude at the start).
+    """
+
+    t: float
+    C_nb: np.ndarray
+    sigma: np.ndarray
+    method: str
+    latitude: float | None = None
+    velocity_n: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    details: dict = field(default_factory=dict)
+
+    @property
+    def roll(self) -> float:
+        return float(att.euler_from_dcm_nb(self.C_nb)[0])
+
+    @property
+    def pitch(self) -> float:
+        return float(att.euler_from_dcm_nb(self.C_nb)[1])
+
+    @property
+    def heading(self) -> float:
+        return float(att.euler_from_dcm_nb(self.C_nb)[2])
+
+    def to_dict(self) -> dict:
+        d = {"t": self.t, "roll_deg": np.degrees(self.roll), "pitch_deg": np.degrees(self.pitch),
+             "heading_deg": np.degrees(self.heading),
+             "sigma_east_deg": np.degrees(self.sigma[0]),
+             "sigma_north_deg": np.degrees(self.sigma[1]),
+             "sigma_heading_deg": np.degrees(self.sigma[2]), "method": self.method,
+             "velocity_n": [float(x) for x in self.velocity_n]}
+        if self.latitude is not None:
+            d["latitude_deg"] = np.degrees(self.latitude)
+        return d
+
+
+def levelling(f_b):
+    """Roll and pitch (rad) from the specific force at rest, ``f^b = C_n^b (0, 0, g)``.
+
+    With the DESIGN §2 matrix, ``f^b = g (−cosθ sinγ, sinθ, cosθ cosγ)``.
+    """
+    f = np.asarray(f_b, dtype=float)
+    pitch = np.arctan2(f[..., 1], np.hypot(f[..., 0], f[..., 2]))
+    roll = np.arctan2(-f[..., 0], f[..., 2])
+    return roll, pitch
+
+
+def triad(b1, b2, n1, n2):
+    """``C_n^b`` with ``C n1 ∥ b1`` exactly and ``C n2`` as close to ``b2`` as that allows."""
+    def frame(u, w):
+        u = np.asarray(u, dtype=float) / np.linalg.norm(u)
+        c = np.cross(u, w)
+        nc = np.linalg.norm(c)
+        if nc < 1e-9 * np.linalg.norm(w):
+            raise SelfnavError("alignment vectors are parallel: heading is undefined")
+        c = c / nc
+        return np.column_stack([u, c, np.cross(u, c)])
+
+    return frame(b1, b2) @ frame(n1, n2).T
+
+
+# --------------------------------------------------------------------------------------------
+# static
+# --------------------------------------------------------------------------------------------
+def coarse_align(imu, *, lat=None, h=None) -> Alignment:
+    """Static coarse alignment by the seed 000 estimator (:func:`estimate_latitude`).
+
+    Parameters
+    ----------
+    imu : ImuData
+        A record at rest (rates in rad/s, specific force in m/s²).
+    lat : float, optional
+        Known latitude, rad (reported instead of the estimated one; the attitude is the same).
+    h : float, optional
+        Height for the estimator's gravity check, m.
+    """
+    res = estimate_latitude(imu, h=h)
+    C = att.dcm_nb_from_euler(res.roll, res.pitch, res.heading)
+    # tilt sigma from the accelerometer noise of the mean; heading from the estimator
+    f_std = imu.f_ib_b.std(axis=0) / np.sqrt(len(imu))
+    s_tilt = float(np.linalg.norm(f_std[:2]) / max(np.linalg.norm(res.f_mean_b), 1e-9))
+    sigma = np.array([s_tilt, s_tilt, res.sigma_heading])
+    return Alignment(float(imu.t[-1]), C, sigma, "coarse (seed 000 estimator)",
+                     latitude=float(res.latitude if lat is None else lat),
+                     details={"estimated_latitude": res.latitude,
+                              "latitude_sigma": res.sigma, "warnings": list(res.warnings)})
+
+
+def _static_error_model(lat, g, R_M, R_N, omega=OMEGA_EARTH):
+    """Continuous-time matrix of the 10-state static error model (module docstring).
+
+    State ``(δv_E, δv_N, φ_E, φ_N, φ_U, ∇_E, ∇_N, ε_E, ε_N, ε_U)``.
+    """
+    s, c = omega * np.sin(lat), omega * np.cos(lat)
+    F = np.zeros((10, 10))
+    F[0, 3], F[0, 1], F[0, 5] = -g, 2 * s, 1.0
+    F[1, 2], F[1, 0], F[1, 6] = g, -2 * s, 1.0
+    F[2, 4], F[2, 3], F[2, 1], F[2, 7] = -c, s, -1.0 / R_M, -1.0
+    F[3, 2], F[3, 0], F[3, 8] = -s, 1.0 / R_N, -1.0
+    F[4, 2], F[4, 0], F[4, 9] = c, np.tan(lat) / R_N, -1.0
+    return F
+
+
+def _map_solve(A, y, sig2, prior, x0):
+    """MAP estimate and covariance of ``y = A x + noise(sig2)`` with prior ``x ~ N(x0, diag)``.
+
+    Solved in prior-scaled variables as a stacked least squares (well conditioned).
+    """
+    D = np.sqrt(prior)
+    As = np.vstack([A * D / np.sqrt(sig2), np.eye(len(D))])
+    ys = np.concatenate([y / np.sqrt(sig2), x0 / D])
+    u = np.linalg.lstsq(As, ys, rcond=None)[0]
+    _, sv, vt = np.linalg.svd(As, full_matrices=False)
+    Pu = (vt.T / sv**2) @ vt
+    return D * u, D[:, None] * Pu * D[None, :]
+
+
+def _random_walk_block_cov(nblk, block):
+    """Covariance of ``∫ W dt`` over consecutive blocks for a unit-intensity Wiener process W."""
+    i = np.arange(1, nblk + 1, dtype=float)
+    K = block**3 * (np.minimum.outer(i, i) - 0.5)
+    K[np.diag_indices(nblk)] = block**3 * (i - 1.0 + 1.0 / 3.0)
+    return K
+
+
+def noise_densities(imu):
+    """White-noise densities ``(arw, vrw)`` (rad/√s, m/s/√s) from sample-to-sample scatter.
+
+    At rest the first differences remove the mean and slow drifts; any rocking of the base
+    adds to the estimate, which then errs on the safe side.
+    """
+    dt = float(np.median(np.diff(imu.t)))
+    arw = float(np.sqrt(np.mean(np.diff(imu.omega_ib_b, axis=0) ** 2) / 2.0 * dt))
+    vrw = float(np.sqrt(np.mean(np.diff(imu.f_ib_b, axis=0) ** 2) / 2.0 * dt))
+    return arw, vrw
+
+
+def fine_align(imu, lat, C_nb0, *, h=0.0, block=1.0, tilt_sigma=1.0 * DEG,
+               heading_sigma=10.0 * DEG, accel_bias_sigma=1e-3 * G_STD,
+               gyro_bias_sigma=1.0 * DEG_PER_H, arw=None, vrw=None, passes=2) -> Alignment:
+    """Static fine alignment by least squares on the velocity-error growth (module docstring).
+
+    Parameters
+    ----------
+    imu : ImuData
+        Record at rest (the same one the coarse alignment used, or a longer one).
+    lat : float
+        Latitude, rad.
+    C_nb0 : (3, 3)
+        Coarse attitude (nav -> body) at the start of the record.
+    h : float
+        Height, m (the vertical channel is held there).
+    block : float
+        Length of the velocity-difference blocks, s (lengthened to keep at most 600 blocks).
+    tilt_sigma, heading_sigma, accel_bias_sigma, gyro_bias_sigma : float
+        Prior 1-σ of the initial attitude errors (rad) and of the constant biases (m/s², rad/s).
+    arw, vrw : float, optional
+        Gyro and accelerometer white-noise densities, rad/√s and m/s/√s (default: from the
+        data, :func:`noise_densities`). The angle random walk makes the velocity-difference
+        errors correlated; the fit is a generalized least squares with that covariance.
+    passes : int
+        Mechanize-and-fit passes (the later ones remove the linearization error).
+
+    Returns
+    -------
+    Alignment
+        Attitude at the *end* of the record (where navigation starts), with its sigma;
+        ``details["C_nb_start"]``, ``details["sigma_start"]``: the attitude at the start.
+    """
+    t = np.asarray(imu.t, dtype=float)
+    if len(t) < 10:
+        raise SelfnavError("fine alignment needs a record at rest of at least 10 samples")
+    dt = float(np.median(np.diff(t)))
+    t0 = t[0] - dt
+    T = t[-1] - t0
+    step = max(int(round(block / dt)), 1, int(np.ceil(len(t) / 600)))
+    nblk = len(t) // step
+    if nblk < 8:
+        raise SelfnavError(f"fine alignment needs at least 8 blocks of {block} s, got {nblk}")
+    blk = step * dt
+    g = float(normal_gravity(lat, h))
+    R_M, R_N = (float(x) for x in radii(lat, h))
+    F = _static_error_model(lat, g, R_M, R_N)
+    Phi = expm(F * blk)
+    # velocity at block ends as a linear function of the 8 unknowns x (initial δv is zero)
+    S = np.zeros((10, 8))
+    S[2:, :] = np.eye(8)
+    M = np.empty((nblk + 1, 10, 8))
+    M[0] = S
+    for j in range(nblk):
+        M[j + 1] = Phi @ M[j]
+    dM = np.diff(M[:, 0:2, :], axis=0)
+    # covariance of the block differences (same for East and North): ARW tilt walk + VRW
+    a_est, v_est = noise_densities(imu)
+    arw = a_est if arw is None else float(arw)
+    vrw = v_est if vrw is None else float(vrw)
+    Sig = (g * arw) ** 2 * _random_walk_block_cov(nblk, blk)
+    Sig[np.diag_indices(nblk)] += (vrw**2 + 1e-18) * blk
+    L = np.linalg.cholesky(Sig)
+    Aw = np.vstack([solve_triangular(L, dM[:, 0, :], lower=True),
+                    solve_triangular(L, dM[:, 1, :], lower=True)])
+    prior = np.array([tilt_sigma, tilt_sigma, heading_sigma, accel_bias_sigma, accel_bias_sigma,
+                      gyro_bias_sigma, gyro_bias_sigma, gyro_bias_sigma]) ** 2
+    idx = np.arange(0, nblk + 1) * step  # rows of the trajectory (row 0 is the state at t0)
+    C = np.asarray(C_nb0, dtype=float)
+    phi_done = np.zeros(3)
+    for _ in range(max(int(passes), 1)):
+        tr = integrate_imu(imu, lat, 0.0, h, np.zeros(3), C, vertical="fixed", h_ref=h)
+        dv = np.diff(tr.velocity_n[idx, :2], axis=0)
+        yw = np.concatenate([solve_triangular(L, dv[:, 0], lower=True),
+                             solve_triangular(L, dv[:, 1], lower=True)])
+        # the prior stays centred on the coarse attitude: its mean is −(corrections so far)
+        x0 = np.concatenate([-phi_done, np.zeros(5)])
+        # a misfit beyond the noise (linearization, unmodelled errors) scales the noise up
+        scale = 1.0
+        for _ in range(3):
+            x, P = _map_solve(Aw, yw, scale, prior, x0)
+            chi2 = float(np.sum((yw - Aw @ x) ** 2) / max(len(yw) - 8, 1))
+            if chi2 <= 1.2 * scale:
+                break
+            scale = chi2
+        C = C @ att.rotvec_to_dcm(-x[:3])  # C_bn_true = (I + [φ]) C_bn_computed
+        phi_done = phi_done + x[:3]
+    # attitude at the end: the mechanization's, corrected by the model's error at T
+    tr = integrate_imu(imu, lat, 0.0, h, np.zeros(3), C, vertical="fixed", h_ref=h)
+    ST = expm(F * T) @ S
+    phiT = ST[2:5] @ np.concatenate([[0.0, 0.0, 0.0], x[3:]])
+    C_end = tr.C_nb[-1] @ att.rotvec_to_dcm(-phiT)
+    PT = ST[2:5] @ P @ ST[2:5].T + np.eye(3) * arw**2 * T
+    return Alignment(float(t[-1]), C_end, np.sqrt(np.diag(PT)), "fine (velocity-error LS)",
+                     latitude=float(lat),
+                     details={"C_nb_start": C, "sigma_start": np.sqrt(np.diag(P)[:3]),
+                              "accel_bias_n": x[3:5], "gyro_bias_n": x[5:8],
+                              "chi2_per_dof": chi2, "arw": arw, "vrw": vrw, "blocks": nblk,
+                              "block_s": blk})
+
+
+def align_static(imu, *, lat=None, h=0.0, **fine_options) -> Alignment:
+    """Coarse then fine alignment of a static record; the latitude is estimated if not given."""
+    coarse = coarse_align(imu, lat=lat, h=h)
+    la = coarse.latitude
+    C0 = coarse.C_nb
+    fine = fine_align(imu, la, C0, h=h, **fine_options)
+    fine.details["coarse"] = coarse
+    return fine
+
+
+# --------------------------------------------------------------------------------------------
+# in motion (vehicle)
+# --------------------------------------------------------------------------------------------
+def velocity_from_positions(t, lat, lon, h):
+    """ENU velocity at each epoch from GNSS positions by central differences, m/s."""
+    t, lat, lon, h = (np.asarray(x, dtype=float) for x in (t, lat, lon, h))
+    if len(t) < 3:
+        raise SelfnavError("need at least 3 GNSS positions to difference")
+    R_M, R_N = radii(lat, h)
+    dn = np.gradient(lat, t) * R_M
+    de = np.gradient(np.unwrap(lon), t) * R_N * np.cos(lat)
+    return np.column_stack([de, dn, np.gradient(h, t)])
+
+
+def align_in_motion(imu, t_gnss, velocity_n, lat, h=0.0, *, min_speed=5.0, window=1.0,
+                    velocity_sigma=None) -> Alignment:
+    """Attitude of a vehicle from GNSS velocity and the specific force (TRIAD).
+
+    At the first GNSS epoch where the horizontal speed exceeds ``min_speed``: the body forward
+    axis (RFU ``y``) is taken along the GNSS velocity (no side-slip, IMU axes along the vehicle)
+    and the specific force measured over ``±window/2`` equals ``a^n − g^n`` with the GNSS
+    acceleration ``a^n`` (Coriolis neglected: < 3 mm/s² at road speeds). Roll and pitch come
+    from the specific force, heading from the course.
+
+    Parameters
+    ----------
+    imu : ImuData
+    t_gnss : (M,)
+    velocity_n : (M, 3)
+        GNSS ENU velocity (from Doppler, or :func:`velocity_from_positions`).
+    lat, h : float
+        Approximate position for gravity, rad, m (or arrays of M values).
+    min_speed : float
+        m/s; below it the course is too noisy to give the heading.
+    window : float
+        s, averaging window of the specific force around the epoch.
+    velocity_sigma : float, optional
+        1-σ of each GNSS velocity component, m/s: gives ``sigma`` (heading ``σ_v/speed``,
+        tilts ``σ_a/g`` with the differenced acceleration's ``σ_a``); NaN without it.
+    """
+    tg = np.asarray(t_gnss, dtype=float)
+    v = np.asarray(velocity_n, dtype=float)
+    speed = np.hypot(v[:, 0], v[:, 1])
+    ok = np.nonzero(speed > min_speed)[0]
+    ok = ok[(tg[ok] - window / 2 >= imu.t[0]) & (tg[ok] + window / 2 <= imu.t[-1])]
+    if len(ok) == 0:
+        raise SelfnavError(f"the GNSS speed never exceeds {min_speed} m/s while IMU data are "
+                           "available: cannot align in motion (align at rest instead)")
+    k = int(ok[0])
+    a_n = np.array([np.gradient(v[:, i], tg)[k] for i in range(3)])
+    lat_k = float(np.broadcast_to(lat, tg.shape)[k])
+    h_k = float(np.broadcast_to(h, tg.shape)[k])
+    g_n = np.array([0.0, 0.0, -float(normal_gravity(lat_k, h_k))])
+    sel = np.abs(imu.t - tg[k]) <= window / 2
+    if not np.any(sel):
+        sel = np.argmin(np.abs(imu.t - tg[k]))
+    f_b = np.atleast_2d(imu.f_ib_b[sel]).mean(axis=0)
+    C = triad(f_b, np.array([0.0, 1.0, 0.0]), a_n - g_n, v[k])
+    sigma = np.full(3, np.nan)
+    if velocity_sigma is not None:
+        kk = np.clip([k - 1, k + 1], 0, len(tg) - 1)
+        sig_a = float(velocity_sigma) * np.sqrt(2.0) / max(tg[kk[1]] - tg[kk[0]], 1e-9)
+        sigma = np.array([sig_a / -g_n[2], sig_a / -g_n[2], float(velocity_sigma) / speed[k]])
+    return Alignment(float(tg[k]), C, sigma, "in motion (GNSS course + TRIAD)",
+                     latitude=lat_k, velocity_n=v[k].copy(),
+                     details={"speed": float(speed[k]), "epoch": k, "accel_n": a_n})

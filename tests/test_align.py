@@ -1,0 +1,166 @@
+"""Alignment: levelling/TRIAD identities, coarse and fine static alignment, in-motion heading."""
+import numpy as np
+import pytest
+
+from selfnav import attitude as att
+from selfnav.align import (DEG, DEG_PER_H, align_in_motion, align_static, coarse_align,
+                           fine_align, levelling, noise_densities, triad, velocity_from_positions)
+from selfnav.earth import OMEGA_EARTH, normal_gravity, radii
+from selfnav.errors import SelfnavError
+from selfnav.io.imu import ImuData
+from selfnav.simulate.static import rocking, static_imu
+
+G0 = 9.80665
+LAT = np.radians(45.0)
+ROLL, PITCH, HEADING = np.radians(1.0), np.radians(-2.0), np.radians(30.0)
+C_TRUE = att.dcm_nb_from_euler(ROLL, PITCH, HEADING)
+NAV_GRADE = dict(accel_bias_sigma=25e-6 * G0, gyro_bias_sigma=0.005 * DEG_PER_H)
+
+
+def nav_error(C_est, C_true=C_TRUE):
+    """Attitude error φ in nav axes (E, N, U): C_bn_est = (I − [φ]) C_bn_true."""
+    return att.dcm_to_rotvec(C_true.T @ C_est)
+
+
+def test_levelling_and_triad_match_the_design_convention():
+    rng = np.random.default_rng(0)
+    for _ in range(20):
+        r, p, hd = rng.uniform(-1.2, 1.2), rng.uniform(-1.2, 1.2), rng.uniform(0, 2 * np.pi)
+        C = att.dcm_nb_from_euler(r, p, hd)
+        f = C @ np.array([0.0, 0.0, 9.8])
+        r2, p2 = levelling(f)
+        assert r2 == pytest.approx(r, abs=1e-12) and p2 == pytest.approx(p, abs=1e-12)
+        n1, n2 = rng.normal(size=3), rng.normal(size=3)
+        np.testing.assert_allclose(triad(C @ n1, C @ n2, n1, n2), C, atol=1e-12)
+
+
+def test_coarse_alignment_of_an_exact_static_record():
+    imu = static_imu(LAT, 120.0, 0.01, roll=ROLL, pitch=PITCH, heading=HEADING)
+    a = coarse_align(imu)
+    assert np.abs(nav_error(a.C_nb)).max() < 1e-9
+    assert a.latitude == pytest.approx(LAT, abs=1e-9)
+    assert a.heading == pytest.approx(HEADING, abs=1e-9)
+
+
+def test_fine_alignment_converges_from_a_wrong_start_on_exact_data():
+    imu = static_imu(LAT, 300.0, 0.01, roll=ROLL, pitch=PITCH, heading=HEADING)
+    C0 = att.dcm_nb_from_euler(ROLL + 0.002, PITCH - 0.001, HEADING + 0.03)  # 0.1°, 1.7°
+    a = fine_align(imu, LAT, C0, **NAV_GRADE)
+    # tilts exact; the heading keeps the prior's pull towards the coarse value, split with the
+    # inseparable East gyro bias: 0.03 σ_ε² Ω cosφ / (σ_ε² + (Ω cosφ σ_H)²) / (Ω cosφ) = 2e-7
+    err = nav_error(a.details["C_nb_start"])
+    assert np.abs(err[:2]).max() < 1e-8
+    assert abs(err[2]) < 3e-7
+    assert np.all(np.abs(err) < 0.01 * a.details["sigma_start"])
+    assert np.abs(nav_error(a.C_nb)[:2]).max() < 1e-8
+    assert a.t == imu.t[-1]
+
+
+def test_fine_alignment_sigma_is_consistent_on_noisy_navigation_grade_data():
+    """Error/σ over 16 runs with random biases, ARW and VRW: pooled RMS in [0.7, 1.4]."""
+    z = []
+    for s in range(16):
+        rng = np.random.default_rng(100 + s)
+        imu = static_imu(LAT, 150.0, 0.01, roll=ROLL, pitch=PITCH, heading=HEADING,
+                         arw=0.002 * DEG / 60, vrw=20e-6 * G0, seed=s,
+                         gyro_bias=rng.normal(size=3) * 0.005 * DEG_PER_H,
+                         accel_bias=rng.normal(size=3) * 25e-6 * G0)
+        c = coarse_align(imu)
+        a = fine_align(imu, LAT, c.C_nb, **NAV_GRADE)
+        z.append(nav_error(a.details["C_nb_start"]) / a.details["sigma_start"])
+        assert 0.7 < a.details["chi2_per_dof"] < 1.3
+    z = np.array(z)
+    rms = np.sqrt(np.mean(z**2, axis=0))
+    assert 0.7 < np.sqrt(np.mean(z**2)) < 1.4, rms
+    assert np.all((rms > 0.5) & (rms < 1.6)), rms
+
+
+def test_fine_alignment_on_a_rocking_base():
+    """0.05° rocking at 3 s plus a tilt drift: the gyros follow it, the σ stays honest."""
+    for s in range(4):
+        dist = lambda t, s=s: rocking(t, amplitude=np.radians(0.05), period=3.0,  # noqa: E731
+                                      drift=np.radians(0.02), rng=s)
+        imu = static_imu(LAT, 150.0, 0.01, roll=ROLL, pitch=PITCH, heading=HEADING,
+                         arw=0.002 * DEG / 60, vrw=20e-6 * G0, seed=s, disturbance=dist)
+        beta, _ = dist(np.concatenate([[0.0], imu.t]))
+        C_start = C_TRUE @ att.rotvec_to_dcm(beta[0]).T  # C_nb(t) = C0 exp([β])^T
+        C_end = C_TRUE @ att.rotvec_to_dcm(beta[-1]).T
+        a = fine_align(imu, LAT, coarse_align(imu).C_nb, **NAV_GRADE)
+        assert np.all(np.abs(nav_error(a.details["C_nb_start"], C_start))
+                      < 3 * a.details["sigma_start"])
+        assert np.all(np.abs(nav_error(a.C_nb, C_end)) < 3 * a.sigma)
+        assert np.abs(nav_error(a.C_nb, C_end)[:2]).max() < np.radians(10 / 3600)
+
+
+def test_east_gyro_bias_sets_the_gyrocompass_heading_limit():
+    """Heading and East gyro bias are not separable at rest: error = ε_E / (Ω cos φ)."""
+    eps = 0.01 * DEG_PER_H
+    imu = static_imu(LAT, 300.0, 0.01, roll=ROLL, pitch=PITCH, heading=HEADING,
+                     gyro_bias=C_TRUE @ np.array([eps, 0.0, 0.0]))
+    a = fine_align(imu, LAT, C_TRUE, accel_bias_sigma=25e-6 * G0,
+                   gyro_bias_sigma=1e-4 * DEG_PER_H)
+    limit = eps / (OMEGA_EARTH * np.cos(LAT))
+    assert abs(nav_error(a.C_nb)[2]) == pytest.approx(limit, rel=0.02)
+
+
+def test_align_static_estimates_latitude_and_attitude():
+    imu = static_imu(LAT, 300.0, 0.01, roll=ROLL, pitch=PITCH, heading=HEADING,
+                     arw=0.002 * DEG / 60, vrw=20e-6 * G0, seed=7)
+    a = align_static(imu, **NAV_GRADE)
+    assert a.latitude == pytest.approx(LAT, abs=np.radians(0.05))
+    err = nav_error(a.C_nb)
+    assert np.all(np.abs(err) < 4 * a.sigma)
+    assert a.sigma[2] < np.radians(0.1)
+    d = a.to_dict()
+    assert d["heading_deg"] == pytest.approx(30.0, abs=0.1)
+    arw, vrw = noise_densities(imu)
+    assert arw == pytest.approx(0.002 * DEG / 60, rel=0.05)
+    assert vrw == pytest.approx(20e-6 * G0, rel=0.05)
+
+
+def _vehicle_record(roll, slope, course, speed0, accel, lat=LAT, h=100.0):
+    """Straight drive up a slope with constant acceleration; GNSS at 10 Hz, IMU at 100 Hz."""
+    u = np.array([np.sin(course) * np.cos(slope), np.cos(course) * np.cos(slope), np.sin(slope)])
+    tg = np.arange(0.0, 20.0, 0.1)
+    v = (speed0 + accel * tg)[:, None] * u
+    C = att.dcm_nb_from_euler(roll, slope, course)  # body forward along the velocity
+    f_n = accel * u + np.array([0.0, 0.0, float(normal_gravity(lat, h))])
+    ti = np.arange(0.0, 20.0, 0.01)
+    imu = ImuData(ti, np.zeros((len(ti), 3)), np.tile(C @ f_n, (len(ti), 1)),
+                  source="simulated vehicle")
+    return imu, tg, v, C
+
+
+def test_in_motion_alignment_from_gnss_course():
+    imu, tg, v, C = _vehicle_record(np.radians(3.0), np.radians(2.0), np.radians(250.0), 1.0,
+                                    0.8)
+    a = align_in_motion(imu, tg, v, LAT, 100.0, min_speed=5.0)
+    k = a.details["epoch"]
+    assert np.hypot(*v[k, :2]) > 5.0 and np.hypot(*v[k - 1, :2]) <= 5.0
+    assert np.abs(nav_error(a.C_nb, C)).max() < 1e-9
+    assert a.heading == pytest.approx(np.radians(250.0), abs=1e-9)
+    np.testing.assert_allclose(a.velocity_n, v[k])
+    # GNSS velocity noise: the heading error follows σ_v / speed
+    rng = np.random.default_rng(3)
+    errs = []
+    for _ in range(200):
+        vn = v + rng.normal(size=v.shape) * 0.05
+        b = align_in_motion(imu, tg, vn, LAT, 100.0, min_speed=5.0, velocity_sigma=0.05)
+        errs.append(nav_error(b.C_nb, C) / b.sigma)
+    rms = np.sqrt(np.mean(np.square(errs), axis=0))
+    assert 0.8 < rms[2] < 1.25, rms
+    assert np.all(rms[:2] < 1.25), rms
+    with pytest.raises(SelfnavError, match="never exceeds"):
+        align_in_motion(imu, tg, v, LAT, 100.0, min_speed=50.0)
+
+
+def test_velocity_from_positions():
+    t = np.arange(0.0, 10.0, 0.5)
+    lat0, h = np.radians(60.0), 10.0
+    R_M, R_N = radii(lat0, h)
+    lat = lat0 + 3.0 * t / R_M
+    lon = 0.1 + 4.0 * t / (R_N * np.cos(lat0))
+    v = velocity_from_positions(t, lat, lon, np.full_like(t, h))
+    np.testing.assert_allclose(v[:, 1], 3.0, rtol=1e-6)
+    np.testing.assert_allclose(v[:, 0], 4.0, rtol=1e-5)
+    np.testing.assert_allclose(v[:, 2], 0.0, atol=1e-12)
