@@ -1,0 +1,332 @@
+"""Moving-base latitude and longitude (seed 002/003, DESIGN §4): observer, ship, errors, CLI."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from selfnav import attitude as att
+from selfnav import moving as mv
+from selfnav.cli import main
+from selfnav.earth import OMEGA_EARTH
+from selfnav.io import write_csv
+from selfnav.io.attitude_file import internal_attitude
+from selfnav.simulate.ship import exact_body_rates, nav_rate_n, ship_trajectory
+
+DRIFT_1 = np.array([4.0, 6.0, 9.0]) * 1e-6   # seed: "order 1 °/h"
+DRIFT_01 = np.array([4.0, 6.0, 9.0]) * 1e-7  # seed: "order 0.1 °/h"
+
+
+# ----------------------------------------------------------------------------- seed example
+def test_seed_example_printed_diverges_stable_converges():
+    t, e, _ = mv.seed_example(DRIFT_1, form="stable", t_end=10.0)
+    tp, ep, _ = mv.seed_example(DRIFT_1, form="printed", t_end=10.0)
+    ok = t > 0.5
+    en = np.linalg.norm(e, axis=1)
+    # stable: bounded by the drift for the whole run (no growth)
+    assert np.all(en[ok] < 1.01 * np.linalg.norm(DRIFT_1))
+    epn = np.linalg.norm(ep, axis=1)
+    # printed: tracks like the stable form while the body has turned < ~90° (|ω_b| t < 1.5) ...
+    early = (tp > 0.5) & (tp < 4.0)
+    assert np.all(epn[early] < 1.05 * np.linalg.norm(DRIFT_1))
+    # ... then diverges (DESIGN §4 erratum): enormous, or not finite, by 8 s
+    late = epn[tp > 8.0]
+    assert np.all(~np.isfinite(late) | (late > 1e3))
+    div = (tp > 0.5) & (~np.isfinite(epn) | (epn > 1e-4))
+    assert 4.0 < tp[int(np.argmax(div))] < 7.0
+
+
+@pytest.mark.parametrize("drift", [DRIFT_1, DRIFT_01])
+def test_seed_steady_state_error_matches_analytic(drift):
+    t, e, _ = mv.seed_example(drift, t_end=6.0)
+    a = mv.seed_steady_error(t, drift, gain=50.0)
+    ss = t > 0.3  # 15 time constants
+    rel = np.linalg.norm(e[ss] - a[ss], axis=1) / np.linalg.norm(a[ss], axis=1)
+    assert rel.max() < 0.01
+    # magnitude: |K (K I + [ω_b])^-1 ω_d|, about |ω_d| for K = 50 ≫ |ω_b|
+    mag = np.linalg.norm(np.linalg.solve(50 * np.eye(3) + att.skew(mv.SEED_OMEGA_B), drift)) * 50
+    assert np.linalg.norm(e[-1]) == pytest.approx(mag, rel=0.01)
+
+
+def test_seed_known_drift_recovers_omega_n():
+    t, e, _ = mv.seed_example(DRIFT_1, known_drift=True, t_end=3.0)
+    assert np.abs(e[t > 0.3]).max() < 1e-8
+
+
+# ----------------------------------------------------------------------------- forms (a), (b), observer
+@pytest.fixture(scope="module")
+def short_ship():
+    tr = ship_trajectory(300.0, 0.01, np.radians(52.0), np.radians(4.0), course_deg=70.0)
+    return tr, exact_body_rates(tr)
+
+
+def test_discrete_and_euler_forms_recover_nav_rate(short_ship):
+    tr, w = short_ship
+    truth = nav_rate_n(tr)
+    tm, wb = mv.omega_n_discrete(tr.t, tr.C_nb, mv.gyro_increments(tr.t, w))
+    mid = 0.5 * (truth[1:] + truth[:-1])
+    assert np.abs(wb - mid)[2:-2].max() < 2e-9          # interior, cubic quadrature
+    wa = mv.omega_n_euler(tr.t, w, tr.C_nb)
+    assert np.abs(wa - truth)[3:-3].max() < 1e-10       # 5-point derivative of exact angles
+
+
+def test_stable_observer_is_discrete_form_low_passed(short_ship):
+    tr, w = short_ship
+    K = 0.2
+    a = mv.MovingBaseNavigator(0.9, 0.0, gain=K, method="observer", smooth=False).run(
+        tr.t, tr.C_nb, omega_ib_b=w)
+    b = mv.MovingBaseNavigator(0.9, 0.0, gain=K, method="discrete", smooth=False).run(
+        tr.t, tr.C_nb, omega_ib_b=w)
+    assert np.abs(a.omega_n - b.omega_n).max() < 1e-6 * OMEGA_EARTH
+
+
+# ----------------------------------------------------------------------------- acceptance: ship
+@pytest.mark.parametrize("lat0_deg,course", [(45.0, 30.0), (-38.0, -140.0)])
+@pytest.mark.parametrize("method", ["observer", "discrete", "euler"])
+def test_ship_acceptance(lat0_deg, course, method):
+    """100 Hz error-free gyros and attitude, ±5° roll, ±2° pitch, ±5° yaw, 5–7 m/s, 30 min."""
+    tr = ship_trajectory(1800.0, 0.01, np.radians(lat0_deg), np.radians(150.0), course_deg=course)
+    sp = np.linalg.norm(tr.velocity_n, axis=1)
+    assert 4.99 < sp.min() and sp.max() < 7.01
+    r, p, h = tr.euler()
+    assert np.degrees(np.abs(r).max()) == pytest.approx(5.0, abs=0.01)
+    assert np.degrees(np.abs(p).max()) == pytest.approx(2.0, abs=0.01)
+    sol = mv.MovingBaseNavigator(np.radians(lat0_deg), np.radians(150.0), method=method).run(
+        tr.t, tr.C_nb, omega_ib_b=exact_body_rates(tr))
+    err = np.degrees(sol.lat - tr.lat[1:])
+    assert np.sqrt(np.mean(err**2)) < 0.005
+    assert abs(np.degrees(sol.lon[-1] - tr.lon[-1])) < 0.005
+
+
+def test_west_faster_than_earth_branch():
+    """At 60° N a westbound 300 m/s vehicle makes Ω + λ̇ < 0 (DESIGN §4)."""
+    tr = ship_trajectory(600.0, 0.02, np.radians(60.0), np.radians(10.0), speed=300.0, speed_amp=0.0,
+                         course_deg=-90.0)
+    wn = nav_rate_n(tr)
+    assert np.all(wn[:, 1] < 0)
+    naive = np.degrees(np.arctan2(wn[:, 2], wn[:, 1]))
+    assert np.all(np.abs(naive - 60.0) > 170.0)            # the naive atan2 is 180° off
+    assert np.allclose(np.degrees(mv.latitude_from_rate(wn)), np.degrees(tr.lat), atol=1e-9)
+    sol = mv.MovingBaseNavigator(np.radians(60.0), np.radians(10.0)).run(
+        tr.t, tr.C_nb, omega_ib_b=exact_body_rates(tr))
+    assert np.all(sol.branch == -1)
+    assert abs(np.degrees(sol.lat[-1]) - 60.0) < 0.005
+    assert abs(np.degrees(sol.lon[-1] - tr.lon[-1])) < 0.005
+
+
+def test_pole_guard_and_longitude_identity():
+    rng = np.random.default_rng(1)
+    lat = np.radians(89.999)
+    w = OMEGA_EARTH * np.array([0.0, np.cos(lat), np.sin(lat)]) + rng.normal(0, 3e-9, (200, 3))
+    assert np.any(w[:, 1] < 0)                              # noise flips the sign of ω_η
+    phi, s = mv.latitude_track(w, lat)
+    assert np.all(np.degrees(phi) > 89.99) and np.all(s == 1)
+    # the seed's ratio alone jumps to the southern pole there
+    assert np.any(np.degrees(mv.latitude_from_rate(w)) < -89.0)
+    # (14) in the form s·hypot − Ω equals ω_η / cos φ − Ω away from the poles
+    w2 = OMEGA_EARTH * np.array([[0.1, 0.7, 0.8], [0.0, -0.4, -0.3]])
+    phi2 = mv.latitude_from_rate(w2)
+    s2 = np.sign(w2[:, 1])
+    assert np.allclose(mv.longitude_rate(w2, s2), w2[:, 1] / np.cos(phi2) - OMEGA_EARTH, rtol=1e-12)
+
+
+def test_internal_attitude_is_circular(short_ship):
+    """Attitude from the same gyros with an assumed latitude returns that latitude."""
+    tr, w = short_ship
+    rv = mv.gyro_increments(tr.t, w)
+    out = []
+    for assumed in (40.0, 52.0, 60.0):
+        C = internal_attitude(tr.t, rv, tr.C_nb[0], np.radians(assumed), tr.velocity_n)
+        sol = mv.MovingBaseNavigator(np.radians(assumed), 0.0, method="discrete").run(
+            tr.t, C, omega_ib_b=w)
+        out.append(np.degrees(sol.lat[-1]))
+    slope = np.polyfit([40.0, 52.0, 60.0], out, 1)[0]
+    assert slope == pytest.approx(1.0, abs=1e-3)            # no information about the truth
+    assert out[0] == pytest.approx(40.0, abs=0.01)
+
+
+def test_streaming_matches_batch(short_ship):
+    tr, w = short_ship
+    rv = mv.gyro_increments(tr.t, w)
+    nav = mv.MovingBaseNavigator(np.radians(52.0), np.radians(4.0), gain=0.2)
+    nav.start(tr.C_nb[0])
+    n = 6000
+    for k in range(n):
+        lat, lon = nav.update(tr.t[k + 1] - tr.t[k], rv[k], tr.C_nb[k + 1])
+    assert abs(np.degrees(lat - tr.lat[n])) < 0.002
+    assert abs(np.degrees(lon - tr.lon[n])) < 0.002
+
+
+# ----------------------------------------------------------------------------- error model
+def test_tilt_error_is_latitude_error_and_bias_sensitivity(short_ship):
+    tr, w = short_ship
+    eps_e = np.radians(0.01)
+    rot = att.rotvec_to_dcm(np.array([eps_e, 0.0, 0.0]))       # C* = (I + [ε]) C, ε about East
+    C_star = tr.C_nb @ np.swapaxes(rot, -1, -2)
+    sol0 = mv.MovingBaseNavigator(np.radians(52.0), 0.0).run(tr.t, tr.C_nb, omega_ib_b=w)
+    sol1 = mv.MovingBaseNavigator(np.radians(52.0), 0.0).run(tr.t, C_star, omega_ib_b=w)
+    assert np.degrees(sol1.lat[-1] - sol0.lat[-1]) == pytest.approx(0.01, rel=0.02)
+    # a gyro bias: prediction of rate_error_to_position
+    b = np.array([0.02, -0.01, 0.03]) * mv.DEG_PER_H
+    sol2 = mv.MovingBaseNavigator(np.radians(52.0), 0.0).run(tr.t, tr.C_nb, omega_ib_b=w + b)
+    d_n = np.einsum("ji,j->i", tr.C_nb[-1], b)
+    pred, lon_rate = mv.rate_error_to_position(sol0.omega_n[-1], d_n)
+    assert sol2.lat[-1] - sol0.lat[-1] == pytest.approx(pred, rel=0.05)
+
+
+def test_grade_table_verdicts():
+    rows = {r["grade"]: r for r in mv.grade_table()}
+    assert rows["navigation"]["verdict"] == "usable"
+    assert rows["tactical"]["verdict"] == "not usable"      # 1 °/h → degrees
+    assert rows["mems"]["verdict"] == "not usable"
+    assert rows["tactical"]["lat_floor_deg"] > 3.0
+
+
+def test_monte_carlo_confirms_error_budget():
+    """Ensemble RMS of the latitude error vs error_budget (bias + ARW + attitude noise)."""
+    res = mv.monte_carlo(n_runs=30, duration=900.0, dt=0.1, seed=7)
+    for name, r in res.items():
+        assert 0.7 < r["ratio"] < 1.35, (name, r)
+
+
+# ----------------------------------------------------------------------------- CLI, bad input
+def _write_ship(tmp_path, duration=120.0, dt=0.01, att_dt=None, radians=False,
+                t_shift=0.0, course=30.0, drop=None):
+    tr = ship_trajectory(duration, dt, np.radians(45.0), np.radians(20.0), course_deg=course)
+    w = exact_body_rates(tr)
+    f = np.einsum("nij,j->ni", tr.C_nb, [0.0, 0.0, 9.8])
+    imu = tmp_path / "imu.csv"
+    write_csv(imu, dict(t=tr.t, wx=w[:, 0], wy=w[:, 1], wz=w[:, 2], fx=f[:, 0], fy=f[:, 1], fz=f[:, 2]),
+              comments=[tr.source], fmt="%.15g")
+    r, p, h = tr.euler()
+    sel = slice(None) if att_dt is None else slice(None, None, int(round(att_dt / dt)))
+    ang = [np.degrees(x[sel]) for x in (r, p, np.mod(h, 2 * np.pi))]
+    if radians:
+        ang = [np.radians(a) for a in ang]
+    ta = tr.t[sel] + t_shift
+    cols = dict(t=ta, roll_deg=ang[0], pitch_deg=ang[1], heading_deg=ang[2])
+    if drop is not None:
+        keep = (ta < drop[0]) | (ta > drop[1])
+        cols = {k: v[keep] for k, v in cols.items()}
+    attf = tmp_path / "att.csv"
+    write_csv(attf, cols, comments=[tr.source], fmt="%.12g")
+    return tr, imu, attf
+
+
+def test_cli_json_and_solution(tmp_path, capsys):
+    tr, imu, attf = _write_ship(tmp_path)
+    out = tmp_path / "sol.csv"
+    rc = main(["moving", "--imu", str(imu), "--attitude", str(attf), "--lat0-deg", "45",
+               "--lon0-deg", "20", "--out", str(out), "--json", "--gain", "0.2"])
+    assert rc == 0
+    import json
+
+    js = json.loads(capsys.readouterr().out)
+    assert js["latitude_end_deg"] == pytest.approx(np.degrees(tr.lat[-1]), abs=0.005)
+    text = out.read_text().splitlines()
+    assert text[0].startswith("# simulated")
+    assert text[3] == "t,lat_deg,lon_deg,sigma_lat_deg,sigma_lon_deg"
+
+
+@pytest.mark.parametrize("case,needle", [
+    ("no_overlap", "no overlap"),
+    ("radians", "radians"),
+    ("gap", "gap"),
+    ("jump", "jump"),
+    ("pitch", "pitch_deg"),
+    ("lat0", "latitude"),
+    ("drift", "three numbers"),
+])
+def test_cli_bad_input_one_line(tmp_path, capsys, case, needle):
+    kw = {}
+    if case == "no_overlap":
+        kw["t_shift"] = 500.0
+    elif case == "radians":
+        kw["radians"] = True
+    elif case == "gap":
+        kw["drop"] = (50.0, 60.0)
+    tr, imu, attf = _write_ship(tmp_path, duration=90.0, **kw)
+    if case == "jump":
+        lines = attf.read_text().splitlines()
+        parts = lines[500].split(",")
+        parts[3] = str(float(parts[3]) + 90.0)
+        lines[500] = ",".join(parts)
+        attf.write_text("\n".join(lines) + "\n")
+    if case == "pitch":
+        lines = attf.read_text().splitlines()
+        parts = lines[10].split(",")
+        parts[2] = "95.0"
+        lines[10] = ",".join(parts)
+        attf.write_text("\n".join(lines) + "\n")
+    lat0 = "145" if case == "lat0" else "45"
+    extra = ["--drift-deg-h", "0.1,0.2"] if case == "drift" else []
+    rc = main(["moving", "--imu", str(imu), "--attitude", str(attf), "--lat0-deg", lat0,
+               "--lon0-deg", "20", "--out", str(tmp_path / "sol.csv")] + extra)
+    err = capsys.readouterr().err.strip().splitlines()
+    assert rc == 2
+    assert len(err) == 1 and err[0].startswith("selfnav: error:")
+    assert needle in err[0]
+
+
+def test_heading_wraparound_handled(tmp_path):
+    """Heading crossing 0/360 every few seconds (10 Hz attitude, 100 Hz IMU): rotations, not angles."""
+    tr, imu, attf = _write_ship(tmp_path, duration=120.0, course=0.0, att_dt=0.1)
+    h = np.loadtxt(attf, delimiter=",", skiprows=2, usecols=3)
+    assert h.max() > 350.0 and h.min() < 10.0
+    out = tmp_path / "sol.csv"
+    assert main(["moving", "--imu", str(imu), "--attitude", str(attf), "--lat0-deg", "45",
+                 "--lon0-deg", "20", "--out", str(out), "--gain", "0.2"]) == 0
+    sol = np.loadtxt(out, delimiter=",", comments="#", skiprows=4)
+    assert abs(sol[-1, 1] - np.degrees(tr.lat[-1])) < 0.005
+
+
+# ----------------------------------------------------------------------------- real data
+def test_real_static_xian_agrees_with_static_method(shared_data):
+    from selfnav.io import read_imu
+    from selfnav.latitude import estimate_latitude
+
+    imu = read_imu(shared_data / "psins_lasergyro_static" / "lasergyro.imu", "psins")
+    r = estimate_latitude(imu)
+    still = estimate_latitude(imu, rest="still")
+    C = np.broadcast_to(att.dcm_nb_from_euler(r.roll, r.pitch, r.heading), (len(imu), 3, 3))
+    _, raw = mv.omega_n_discrete(imu.t, C, imu.omega_ib_b[1:] * np.diff(imu.t)[:, None])
+    lat = mv.latitude_from_rate(raw.mean(axis=0))
+    # a constant attitude cannot see the base's tilt changes: it reproduces the static method
+    # without disturbance compensation (34.63°), not the compensated 34.17°
+    assert np.degrees(lat - still.latitude) == pytest.approx(0.0, abs=0.05)
+    assert abs(np.degrees(lat) - 34.246) < 0.5
+
+
+def test_real_fog_mems_runs_and_is_not_usable(shared_data):
+    from selfnav.io.psins_mat import read_fog_mems
+
+    d = read_fog_mems(shared_data / "psins_fog_mems_vehicle")
+    A = d["attitude"]
+    t = d["imu"].t
+    m = t >= A.t[0]
+    C = att.slerp_dcm(A.t, A.C_nb, t[m])
+    dth = d["dtheta_b"][m][1:] - d["eb0"] * 0.01
+    sol = mv.MovingBaseNavigator(d["lat_ref"][0], d["lon_ref"][0], gain=0.02).run(t[m], C, dtheta_b=dth)
+    assert np.all(np.isfinite(sol.lat))
+    err = abs(np.degrees(sol.lat[-1] - d["lat_ref"][-1]))
+    # MEMS residual bias of several °/h against Ω = 15 °/h: tens of degrees, as the model says
+    assert err > 5.0
+
+
+@pytest.mark.parametrize("imu_step,att_step,att_shift", [(2, 1, 0.0), (1, 7, 0.003)])
+def test_different_rates(imu_step, att_step, att_shift):
+    """Attitude faster than the IMU (slerp onto IMU times) and slower, unaligned (gyros composed)."""
+    from selfnav.io import ImuData
+    from selfnav.io.attitude_file import AttitudeData, navigate_imu_attitude
+
+    tr = ship_trajectory(900.0, 0.01, np.radians(-20.0), np.radians(5.0), course_deg=200.0)
+    w = exact_body_rates(tr)
+    ti = tr.t[::imu_step]
+    imu = ImuData(ti, w[::imu_step], np.tile([0.0, 0.0, 9.8], (len(ti), 1)), source="simulated")
+    ta = tr.t[::att_step] + att_shift
+    ta = ta[ta < tr.t[-1]]
+    A = AttitudeData(ta, att.slerp_dcm(tr.t, tr.C_nb, ta), "simulated attitude")
+    sol = navigate_imu_attitude(imu, A, np.radians(-20.0), np.radians(5.0))
+    ok = sol.t > 300.0
+    e = np.degrees(sol.lat - np.interp(sol.t, tr.t, tr.lat))
+    assert np.sqrt(np.mean(e[ok] ** 2)) < 0.005
+    assert abs(np.degrees(sol.lon[-1] - np.interp(sol.t[-1], tr.t, tr.lon))) < 0.005
