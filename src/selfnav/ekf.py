@@ -36,11 +36,13 @@ import numpy as np
 from selfnav import attitude as att
 from selfnav.earth import OMEGA_EARTH, WGS84, normal_gravity, radii
 from selfnav.errors import SelfnavError
+from selfnav.io.gnss import GnssData
 from selfnav.simulate.trajectory import Trajectory
 from selfnav.strapdown import Strapdown
 
 NX = 15
 IR, IV, IP, IBG, IBA = slice(0, 3), slice(3, 6), slice(6, 9), slice(9, 12), slice(12, 15)
+ISG, ISA = slice(15, 18), slice(18, 21)   # scale-factor errors (option)
 CHI2_3_999 = 16.266
 CHI2_2_999 = 13.816
 CHI2_1_999 = 10.828
@@ -68,6 +70,7 @@ class FilterConfig:
     lever_arm_b: np.ndarray = field(default_factory=lambda: np.zeros(3))   # IMU -> antenna, RFU
     gnss_sigma_h: float | None = None            # override the file's sigma, m
     gnss_sigma_v: float | None = None
+    gnss_sigma_floor: float = 0.1                # smallest σ believed: unmodelled timing, lever arm
     use_gnss_velocity: bool = False
     gnss_vel_sigma: float = 0.1
     nhc: bool = True                             # non-holonomic constraint (wheeled vehicle)
@@ -82,11 +85,17 @@ class FilterConfig:
     aid_step: float = 0.1                        # NHC / ZUPT update interval, s
     robust: bool = True                          # window consistency test and dead reckoning
     gate: float = CHI2_3_999                     # χ² gate on each fix (3 dof)
+    soft_gate: float = 10.0                      # with robust: up to soft_gate × gate, R inflated
+    degraded_window: float = 20.0                # s of suspect fixes to judge their noise
+    degraded_min: int = 8                        # at least this many fixes
     window: int = 6                              # fixes in the consistency window
     suspect_after: int = 2                       # consecutive rejections before suspect mode
     max_accel: float = 5.0                       # start-up motion model, m/s²
     min_init_speed: float = 2.0                  # heading from the GNSS course above this, m/s
     vertical: str = "free"
+    scale_factors: bool = False                  # add gyro and accel scale-factor states (21)
+    gyro_sf_sigma: float = 0.01
+    accel_sf_sigma: float = 0.01
 
     @classmethod
     def for_grade(cls, grade: str, **kw) -> "FilterConfig":
@@ -111,20 +120,6 @@ class FilterConfig:
         d = presets[g]
         d.update(kw)
         return cls(**d)
-
-
-@dataclass
-class GnssData:
-    """GNSS fixes: time (s), WGS-84 lat/lon (rad), h (m), σ (m, horizontal; NaN = unknown),
-    optional ENU velocity (N, 3)."""
-
-    t: np.ndarray
-    lat: np.ndarray
-    lon: np.ndarray
-    h: np.ndarray
-    sigma_m: np.ndarray | None = None
-    velocity_n: np.ndarray | None = None
-    source: str = ""
 
 
 @dataclass
@@ -163,18 +158,25 @@ class InsGnssFilter:
         self.cfg = cfg
         self.ins = Strapdown(lat, lon, h, velocity_n, C_nb, t=t0, ellipsoid=ellipsoid,
                              vertical=cfg.vertical)
+        self.nx = 21 if cfg.scale_factors else NX
         self.bg = np.zeros(3)
         self.ba = np.zeros(3)
-        P = np.zeros((NX, NX))
+        self.sg = np.zeros(3)
+        self.sa = np.zeros(3)
+        P = np.zeros((self.nx, self.nx))
         P[IR, IR] = np.eye(3) * cfg.init_pos_sigma**2
         P[IV, IV] = np.eye(3) * cfg.init_vel_sigma**2
         P[IP, IP] = np.diag(np.square(cfg.init_att_sigma))
         P[IBG, IBG] = np.eye(3) * cfg.gyro_bias_sigma**2
         P[IBA, IBA] = np.eye(3) * cfg.accel_bias_sigma**2
+        if cfg.scale_factors:
+            P[ISG, ISG] = np.eye(3) * cfg.gyro_sf_sigma**2
+            P[ISA, ISA] = np.eye(3) * cfg.accel_sf_sigma**2
         self.P = P
         self._f_n = np.array([0.0, 0.0, 9.8])
         self._w_b = np.zeros(3)
-        self._Phi_acc = np.eye(NX)      # transition since the last stored epoch (smoother)
+        self._f_b = np.array([0.0, 0.0, 9.8])
+        self._Phi_acc = np.eye(self.nx)  # transition since the last stored epoch (smoother)
 
     # ------------------------------------------------------------------ model
     def _F(self, f_n, dt):
@@ -185,7 +187,7 @@ class InsGnssFilter:
         w_ie = np.array([0.0, OMEGA_EARTH * np.cos(lat), OMEGA_EARTH * np.sin(lat)])
         w_en = np.array([-v[1] / rm, v[0] / rn, v[0] * np.tan(lat) / rn])
         C_bn = self.ins.C_nb.T
-        F = np.zeros((NX, NX))
+        F = np.zeros((self.nx, self.nx))
         F[IR, IV] = np.eye(3)
         F[IV, IP] = att.skew(f_n)
         F[IV, IV] = -att.skew(2 * w_ie + w_en)
@@ -196,11 +198,15 @@ class InsGnssFilter:
         F[IP, IBG] = C_bn
         F[IBG, IBG] = -np.eye(3) / cfg.gyro_bias_tau
         F[IBA, IBA] = -np.eye(3) / cfg.accel_bias_tau
+        if cfg.scale_factors:
+            # corrected rate (ω̃ − b)/(1 + s): its error is −(δb + diag(ω) δs)
+            F[IP, ISG] = C_bn * self._w_b[None, :]
+            F[IV, ISA] = -C_bn * self._f_b[None, :]
         return F
 
     def _Q(self, dt):
         cfg = self.cfg
-        q = np.zeros(NX)
+        q = np.zeros(self.nx)
         q[IV] = cfg.vrw**2
         q[IP] = cfg.arw**2
         q[IBG] = 2 * cfg.gyro_bias_instability**2 / cfg.instability_tau
@@ -217,17 +223,18 @@ class InsGnssFilter:
         if len(t) == 0:
             return None
         dt = np.diff(np.concatenate([[self.ins.t], t]))
-        dth = dtheta - self.bg * dt[:, None]
-        dvb = dv - self.ba * dt[:, None]
+        dth = (dtheta - self.bg * dt[:, None]) / (1.0 + self.sg)
+        dvb = (dv - self.ba * dt[:, None]) / (1.0 + self.sa)
         tr = self.ins.run(t, dth, dvb)
         T = float(t[-1] - (t[0] - dt[0]))
         f_b = dvb.sum(0) / T
+        self._f_b = f_b
         self._f_n = tr.C_nb[-1].T @ f_b
         self._w_b = dth.sum(0) / T
         nsub = max(1, int(np.ceil(T / self.cfg.cov_step)))
         F = self._F(self._f_n, T)
         h = T / nsub
-        Phi = np.eye(NX) + F * h + 0.5 * (F @ F) * h * h
+        Phi = np.eye(self.nx) + F * h + 0.5 * (F @ F) * h * h
         Q = self._Q(h)
         for _ in range(nsub):
             self.P = Phi @ self.P @ Phi.T + Q
@@ -245,12 +252,15 @@ class InsGnssFilter:
                       C_nb=att.orthonormalize(C_bn).T)
         self.bg -= dx[IBG]  # δb = estimated − true
         self.ba -= dx[IBA]
+        if self.nx > NX:
+            self.sg -= dx[ISG]
+            self.sa -= dx[ISA]
 
     def _kalman(self, r, H, R):
         S = H @ self.P @ H.T + R
         K = np.linalg.solve(S, H @ self.P).T
         dx = K @ r
-        IKH = np.eye(NX) - K @ H
+        IKH = np.eye(self.nx) - K @ H
         self.P = IKH @ self.P @ IKH.T + K @ R @ K.T
         self._correct(dx)
         return dx
@@ -262,7 +272,7 @@ class InsGnssFilter:
         l_n = C_bn @ self.cfg.lever_arm_b
         z = _enu_offset(ins.lat, ins.lon, ins.h, lat, lon, h)
         r = l_n - z
-        H = np.zeros((3, NX))
+        H = np.zeros((3, self.nx))
         H[:, IR] = np.eye(3)
         H[:, IP] = att.skew(l_n)
         return r, H
@@ -279,13 +289,13 @@ class InsGnssFilter:
         return True, nis, r
 
     def update_velocity(self, velocity_n, sigma):
-        H = np.zeros((3, NX))
+        H = np.zeros((3, self.nx))
         H[:, IV] = np.eye(3)
         r = self.ins.velocity_n - np.asarray(velocity_n)
         R = np.eye(3) * sigma**2
         S = H @ self.P @ H.T + R
         if float(r @ np.linalg.solve(S, r)) > CHI2_3_999:
-            return np.zeros(NX)
+            return np.zeros(self.nx)
         return self._kalman(r, H, R)
 
     def update_nhc(self):
@@ -293,14 +303,14 @@ class InsGnssFilter:
         C_nb = self.ins.C_nb
         v = self.ins.velocity_n
         vb = C_nb @ v
-        H = np.zeros((2, NX))
+        H = np.zeros((2, self.nx))
         H[:, IV] = C_nb[[0, 2]]
         H[:, IP] = -C_nb[[0, 2]] @ att.skew(v)
         R = np.eye(2) * self.cfg.nhc_sigma**2
         return self._kalman(vb[[0, 2]], H, R)
 
     def update_zupt(self):
-        H = np.zeros((3, NX))
+        H = np.zeros((3, self.nx))
         H[:, IV] = np.eye(3)
         return self._kalman(self.ins.velocity_n, H, np.eye(3) * self.cfg.zupt_sigma**2)
 
@@ -308,16 +318,16 @@ class InsGnssFilter:
         """True heading (rad), e.g. magnetic heading plus declination (seed 004 (12))."""
         _, _, hdg = att.euler_from_dcm_nb(self.ins.C_nb)
         r = np.array([np.angle(np.exp(1j * (hdg - heading)))])
-        H = np.zeros((1, NX))
+        H = np.zeros((1, self.nx))
         H[0, 8] = 1.0  # ψ_U raises the computed heading (C̃ = (I − [ψ]) C)
         S = H @ self.P @ H.T + sigma**2
         if float(r @ r / S[0, 0]) > CHI2_1_999:
-            return np.zeros(NX)
+            return np.zeros(self.nx)
         return self._kalman(r, H, np.array([[sigma**2]]))
 
     def take_transition(self):
         Phi = self._Phi_acc
-        self._Phi_acc = np.eye(NX)
+        self._Phi_acc = np.eye(self.nx)
         return Phi
 
 
@@ -495,6 +505,7 @@ def run_filter(imu, gnss: GnssData, cfg: FilterConfig | None = None, *, init=Non
     sig_h = np.where(np.isfinite(sig_file), sig_file, 5.0)
     if cfg.gnss_sigma_h is not None:
         sig_h = np.full(nfix, cfg.gnss_sigma_h)
+    sig_h = np.maximum(sig_h, cfg.gnss_sigma_floor)
     sig_v = np.full(nfix, cfg.gnss_sigma_v) if cfg.gnss_sigma_v is not None else 1.5 * sig_h
 
     # ---------------------------------------------------------------- initialisation
@@ -528,23 +539,31 @@ def run_filter(imu, gnss: GnssData, cfg: FilterConfig | None = None, *, init=Non
     suspect = False
     rejections = 0
     streak = 0
+    degraded = 0
+    sus = []
     reacq = 0
     buf = []          # recent fixes: (k, z-position ENU relative to INS, INS position snapshot)
     last_acc = None   # last accepted fix: (t, lat, lon, h, ins lat, lon, h)
 
+    # INS displacement accumulated by propagation only (ENU, m): the corrections of updates
+    # are not motion, so the window test compares fixes with this
+    disp = np.zeros(3)
+
     def ins_snapshot():
-        return np.array([flt.ins.lat, flt.ins.lon, flt.ins.h])
+        return disp.copy()
 
     for ev_i, (te, kind, k) in enumerate(events):
         j = np.searchsorted(t_imu, te, side="right")
         if j > i_imu:
+            p0 = (flt.ins.lat, flt.ins.lon, flt.ins.h)
             flt.predict(t_imu[i_imu:j], dth_all[i_imu:j], dv_all[i_imu:j])
+            disp += _enu_offset(*p0, flt.ins.lat, flt.ins.lon, flt.ins.h)
             w_blk, f_blk = imu.omega_ib_b[i_imu:j], imu.f_ib_b[i_imu:j]
             i_imu = j
         else:
             w_blk = f_blk = np.zeros((0, 3))
         Pm = flt.P.copy()
-        dx_total = np.zeros(NX)
+        dx_total = np.zeros(flt.nx)
         if kind == 1:
             # still IMU *and* a slow INS: constant velocity also looks still to an IMU
             if (cfg.zupt and np.linalg.norm(flt.ins.velocity_n) < cfg.zupt_speed
@@ -563,14 +582,19 @@ def run_filter(imu, gnss: GnssData, cfg: FilterConfig | None = None, *, init=Non
             nis = float(r @ np.linalg.solve(S, r))
             nis_all[k] = nis
             snap = ins_snapshot()
-            ok = nis <= cfg.gate
+            # soft gate: a fix a little beyond the χ² gate is used with R inflated by NIS/gate
+            # (Huber-like); real model errors are not Gaussian, outliers of 200 m are far beyond
+            ok = nis <= cfg.gate * (cfg.soft_gate if cfg.robust else 1.0)
             if cfg.robust:
                 # window test: displacements between fixes against the INS displacement, which
                 # stays accurate when the absolute INS position has drifted (P cannot weaken it)
                 buf.append((k, snap))
                 buf = buf[-cfg.window:]
                 sv = float(np.sqrt(np.trace(flt.P[IV, IV]) / 3.0)) + 0.2
+                R_scale = 1.0
                 if suspect:
+                    sus.append((gnss.t[k], -r))
+                    sus = [x for x in sus if x[0] > gnss.t[k] - cfg.degraded_window]
                     win_ok = len(buf) >= cfg.window and _window_consistent(buf, gnss, sig_h, sig_v, sv)
                     streak = streak + 1 if win_ok else 0
                     if win_ok and not ok and streak >= cfg.window:
@@ -579,18 +603,32 @@ def run_filter(imu, gnss: GnssData, cfg: FilterConfig | None = None, *, init=Non
                         flt.P[IR, IR] += np.diag(r * r)
                         ok = True
                         reacq += 1
+                    elif win_ok:
+                        pass
                     else:
-                        ok = ok and win_ok
+                        ok = False
+                        # degraded mode: white outliers still carry information. Their scale
+                        # from fix-to-fix differences (which cancel the slow dead-reckoning
+                        # drift) against their scale about the median: equal for white noise,
+                        # much smaller for a drifting (correlated) error, which is not used.
+                        s_eff = _white_scale(sus, cfg)
+                        if s_eff is not None and s_eff > 3.0 * sig_h[k]:
+                            R_d = np.diag([s_eff**2, s_eff**2, (1.5 * s_eff) ** 2])
+                            S_d = H @ flt.P @ H.T + R_d
+                            if float(r @ np.linalg.solve(S_d, r)) <= cfg.gate:
+                                dx_total = flt._kalman(r, H, R_d)
+                                degraded += 1
                 else:
                     ok = ok and _disp_ok(buf[-2], buf[-1], gnss, sig_h, sig_v, sv) if len(buf) > 1 else ok
             mode_all[k] = int(suspect)
             if ok:
-                R = np.diag([sig_h[k] ** 2, sig_h[k] ** 2, sig_v[k] ** 2])
+                R = np.diag([sig_h[k] ** 2, sig_h[k] ** 2, sig_v[k] ** 2]) * max(1.0, nis / cfg.gate)
                 dx_total = flt._kalman(r, H, R)
                 fix_status[k] = 1
                 rejections = 0
                 suspect = False
                 streak = 0
+                sus = []
             else:
                 fix_status[k] = 0
                 rejections += 1
@@ -614,7 +652,7 @@ def run_filter(imu, gnss: GnssData, cfg: FilterConfig | None = None, *, init=Non
         rec_P.append(flt.P.copy())
         rec_Pm.append(flt.P.copy())
         rec_Phi.append(flt.take_transition())
-        rec_dx.append(np.zeros(NX))
+        rec_dx.append(np.zeros(flt.nx))
     rec_t = np.asarray(rec_t)
     states = np.asarray(rec_state)
     Ps = np.asarray(rec_P)
@@ -625,7 +663,8 @@ def run_filter(imu, gnss: GnssData, cfg: FilterConfig | None = None, *, init=Non
     traj, sig, bg, ba = _unpack(rec_t, states, Ps)
     acc = fix_status == 1
     stats = {"fixes": int(nfix), "accepted": int(acc.sum()), "rejected": int((fix_status == 0).sum()),
-             "before_init": int((fix_status == -1).sum()), "reacquisitions": reacq}
+             "before_init": int((fix_status == -1).sum()), "reacquisitions": reacq,
+             "degraded_updates": degraded}
     return FilterResult(traj, sig[:, IR], sig[:, IV], sig[:, IP], bg, ba, gnss.t, fix_status,
                         innov, nis_all, mode_all, smoothed, stats)
 
@@ -637,11 +676,28 @@ def _disp_ok(a, b, gnss, sig_h, sig_v, sv):
     """
     (ka, sa), (kb, sb) = a, b
     dz = _enu_offset(gnss.lat[ka], gnss.lon[ka], gnss.h[ka], gnss.lat[kb], gnss.lon[kb], gnss.h[kb])
-    di = _enu_offset(sa[0], sa[1], sa[2], sb[0], sb[1], sb[2])
+    di = sb - sa  # INS displacement by propagation (see run_filter)
     dtt = gnss.t[kb] - gnss.t[ka]
     s2 = np.array([sig_h[ka] ** 2 + sig_h[kb] ** 2] * 2 + [sig_v[ka] ** 2 + sig_v[kb] ** 2]) + (sv * dtt) ** 2
     d = dz - di
     return float(np.sum(d * d / s2)) <= CHI2_3_999
+
+
+def _white_scale(sus, cfg):
+    """Robust per-axis scale of suspect innovations if they look white, else None.
+
+    ``s_diff`` from fix-to-fix differences (÷√2) cancels a slow dead-reckoning drift;
+    ``s_level`` is the spread about the median. White errors give s_diff ≈ s_level; a slowly
+    drifting (Gauss–Markov) error gives s_diff ≪ s_level and its fixes are not averaged.
+    """
+    if len(sus) < cfg.degraded_min:
+        return None
+    v = np.array([x[1][:2] for x in sus])
+    s_diff = 1.4826 * np.median(np.abs(np.diff(v, axis=0))) / np.sqrt(2.0)
+    s_level = 1.4826 * np.median(np.abs(v - np.median(v, axis=0)))
+    if s_level <= 0 or s_diff < 0.7 * s_level:
+        return None
+    return float(max(s_diff, s_level))
 
 
 def _window_consistent(buf, gnss, sig_h, sig_v, sv):
@@ -658,7 +714,8 @@ InsGnssFilter.lever_arm_n = _lever_arm_n
 
 def _pack(flt):
     s = flt.ins
-    return np.concatenate([[s.lat, s.lon, s.h], s.velocity_n, s.C_nb.reshape(9), flt.bg, flt.ba])
+    return np.concatenate([[s.lat, s.lon, s.h], s.velocity_n, s.C_nb.reshape(9), flt.bg, flt.ba,
+                           flt.sg, flt.sa])
 
 
 def _unpack(t, states, Ps):
@@ -683,6 +740,9 @@ def _apply_error(state, dx):
     out[6:15] = att.orthonormalize(C_bn).T.reshape(9)
     out[15:18] = state[15:18] - dx[IBG]
     out[18:21] = state[18:21] - dx[IBA]
+    if len(dx) > NX:
+        out[21:24] = state[21:24] - dx[ISG]
+        out[24:27] = state[24:27] - dx[ISA]
     return out
 
 
@@ -699,7 +759,8 @@ def _rts(states, P_plus, P_minus, Phi, updates):
     n = len(states)
     out = states.copy()
     Ps = P_plus.copy()
-    eps_next = np.zeros(NX)
+    nx = updates.shape[1]
+    eps_next = np.zeros(nx)
     for k in range(n - 2, -1, -1):
         Pm = P_minus[k + 1]
         A = np.linalg.solve(Pm.T, (P_plus[k] @ Phi[k + 1].T).T).T

@@ -1,0 +1,199 @@
+"""GNSS fixes: the native CSV (DESIGN §6: ``t, lat_deg, lon_deg, h_m[, sigma_m]``), RTKLIB ``.pos``
+and NMEA GGA/RMC readers. Positions are converted to WGS-84 at load time (``datum``)."""
+from __future__ import annotations
+
+import calendar
+import datetime as _dt
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from selfnav.errors import InputError
+from selfnav.io.csvio import _open_text, check_time, read_table
+
+#: GPS time origin 1980-01-06 in Unix-like seconds; GPS week seconds are counted from a Sunday.
+GPS_EPOCH_UNIX = 315964800
+WEEK = 604800.0
+
+
+@dataclass
+class GnssData:
+    """GNSS fixes in WGS-84.
+
+    Attributes
+    ----------
+    t : (N,) s
+    lat, lon : (N,) rad
+    h : (N,) m, ellipsoidal
+    sigma_m : (N,) horizontal σ per axis, m (NaN: not given)
+    velocity_n : (N, 3) ENU m/s or None
+    quality : (N,) int or None (RTKLIB Q: 1 fix, 2 float, 5 single, ...)
+    source : str
+    """
+
+    t: np.ndarray
+    lat: np.ndarray
+    lon: np.ndarray
+    h: np.ndarray
+    sigma_m: np.ndarray | None = None
+    velocity_n: np.ndarray | None = None
+    quality: np.ndarray | None = None
+    source: str = ""
+
+    def __len__(self) -> int:
+        return len(self.t)
+
+    def select(self, mask) -> "GnssData":
+        def s(x):
+            return None if x is None else x[mask]
+        return GnssData(self.t[mask], self.lat[mask], self.lon[mask], self.h[mask], s(self.sigma_m),
+                        s(self.velocity_n), s(self.quality), self.source)
+
+
+def _to_wgs84(lat, lon, h, datum, path):
+    d = (datum or "wgs84").lower().replace("-", "").replace(".", "").replace("_", "")
+    if d == "wgs84":
+        return lat, lon, h
+    try:
+        from selfnav import datum as dm
+    except ImportError:  # pragma: no cover
+        raise InputError(path, f"datum '{datum}' needs selfnav.datum") from None
+    out = dm.convert(lat, lon, h, d, "wgs84")
+    return out[0], out[1], out[2]
+
+
+def read_gnss_csv(path, datum: str = "wgs84") -> GnssData:
+    """Native GNSS CSV: ``t, lat_deg, lon_deg, h_m`` and optional ``sigma_m``, ``ve, vn, vu``."""
+    tab = read_table(path, ("t", "lat_deg", "lon_deg", "h_m"), optional=("sigma_m", "ve", "vn", "vu"))
+    t = check_time(tab, min_rows=2)
+    lat_deg, lon_deg = tab["lat_deg"], tab["lon_deg"]
+    for name, v, lim in (("lat_deg", lat_deg, 90.0), ("lon_deg", lon_deg, 360.0)):
+        bad = np.abs(v) > lim
+        if bad.any():
+            k = int(np.argmax(bad))
+            raise InputError(path, f"{v[k]} is not a {name[:3]}itude in degrees (radians? "
+                             "projected metres? swapped columns?)", row=int(tab["_lines"][k]),
+                             column=name)
+    sig = tab.get("sigma_m")
+    if sig is not None and np.any(sig <= 0):
+        k = int(np.argmax(sig <= 0))
+        raise InputError(path, f"sigma_m {sig[k]} must be positive", row=int(tab["_lines"][k]),
+                         column="sigma_m")
+    vel = None
+    if all(k in tab for k in ("ve", "vn", "vu")):
+        vel = np.column_stack([tab["ve"], tab["vn"], tab["vu"]])
+    lat, lon, h = _to_wgs84(np.radians(lat_deg), np.radians(lon_deg), tab["h_m"], datum, path)
+    return GnssData(t, np.asarray(lat), np.asarray(lon), np.asarray(h), sig, vel, None, str(path))
+
+
+def gps_seconds_of_week(unix_like_gpst):
+    """GPS seconds of week from Unix-like GPST seconds."""
+    return np.mod(np.asarray(unix_like_gpst, dtype=float) - GPS_EPOCH_UNIX, WEEK)
+
+
+def read_rtklib_pos(path) -> GnssData:
+    """RTKLIB solution file (``.pos``, lat/lon/height format, GPST), time as GPS seconds of week.
+
+    Columns: date, time, lat, lon, h, Q, ns, sdn, sde, sdu, sdne, sdeu, sdun, age, ratio and,
+    when present, vn, ve, vu (m/s). Returns WGS-84 positions, σ = max(sdn, sde), ENU velocity.
+    """
+    path = Path(path)
+    text = _open_text(path)
+    rows, lines = [], []
+    for i, ln in enumerate(text.splitlines()):
+        s = ln.strip()
+        if not s or s.startswith("%"):
+            continue
+        parts = s.split()
+        if len(parts) < 15:
+            raise InputError(path, f"{len(parts)} fields: not an RTKLIB lat/lon .pos row", row=i + 1)
+        try:
+            d = _dt.datetime.strptime(parts[0] + " " + parts[1][:15], "%Y/%m/%d %H:%M:%S.%f")
+        except ValueError:
+            raise InputError(path, f"'{parts[0]} {parts[1]}' is not a GPST date and time "
+                             "(expected YYYY/MM/DD HH:MM:SS.SSS; is the file in week/TOW form?)",
+                             row=i + 1) from None
+        sec = calendar.timegm(d.timetuple())
+        frac = d.microsecond * 1e-6
+        try:
+            vals = [float(x) for x in parts[2:21]]
+        except ValueError:
+            raise InputError(path, "non-numeric value", row=i + 1) from None
+        rows.append([float((sec - GPS_EPOCH_UNIX) % int(WEEK)) + frac] + vals)
+        lines.append(i + 1)
+    if not rows:
+        raise InputError(path, "has no solution rows")
+    a = np.array([r + [np.nan] * (20 - len(r)) for r in rows])
+    t = a[:, 0]
+    if np.any(np.diff(t) <= 0):
+        k = int(np.argmax(np.diff(t) <= 0)) + 1
+        raise InputError(path, "time not increasing (or a GPS week rollover)", row=lines[k])
+    vel = None
+    if np.all(np.isfinite(a[:, 14:17])):
+        vel = np.column_stack([a[:, 15], a[:, 14], a[:, 16]])  # ve, vn, vu
+    sig = np.maximum(a[:, 6], a[:, 7])  # sdn, sde
+    return GnssData(t, np.radians(a[:, 1]), np.radians(a[:, 2]), a[:, 3], sig, vel,
+                    a[:, 4].astype(int), str(path))
+
+
+def _nmea_deg(v, hemi):
+    d = float(v[: v.index(".") - 2])
+    m = float(v[v.index(".") - 2:])
+    x = d + m / 60.0
+    return -x if hemi in ("S", "W") else x
+
+
+def read_nmea(path) -> GnssData:
+    """NMEA 0183 GGA (position, height) with RMC (date, speed, course) where present.
+
+    Time is seconds of day (UTC) from the sentences; h = orthometric + geoid separation.
+    Fixes with quality 0 are dropped; σ from HDOP × 2.5 m when no better is known.
+    """
+    path = Path(path)
+    text = _open_text(path)
+    t, lat, lon, h, sig, q = [], [], [], [], [], []
+    for i, ln in enumerate(text.splitlines()):
+        s = ln.strip()
+        if not s.startswith("$") or len(s) < 7:
+            continue
+        body = s[1:].split("*")[0]
+        f = body.split(",")
+        if f[0][2:] != "GGA" or len(f) < 12:
+            continue
+        if not f[6] or f[6] == "0" or not f[2] or not f[4]:
+            continue
+        try:
+            hh, mm, ss = int(f[1][:2]), int(f[1][2:4]), float(f[1][4:])
+            t.append(hh * 3600 + mm * 60 + ss)
+            lat.append(_nmea_deg(f[2], f[3]))
+            lon.append(_nmea_deg(f[4], f[5]))
+            h.append(float(f[9]) + (float(f[11]) if f[11] else 0.0))
+            sig.append(2.5 * float(f[8]) if f[8] else np.nan)
+            q.append(int(f[6]))
+        except (ValueError, IndexError):
+            raise InputError(path, "malformed GGA sentence", row=i + 1) from None
+    if not t:
+        raise InputError(path, "no valid GGA fixes (is it NMEA?)")
+    t = np.unwrap(np.asarray(t), period=86400.0)
+    return GnssData(t, np.radians(lat), np.radians(lon), np.asarray(h), np.asarray(sig), None,
+                    np.asarray(q), str(path))
+
+
+def read_gnss(path, fmt: str = "auto", datum: str = "wgs84") -> GnssData:
+    """Read GNSS fixes: ``csv`` (native), ``pos`` (RTKLIB), ``nmea``; ``auto`` by extension."""
+    p = Path(path)
+    if fmt == "auto":
+        ext = p.suffix.lower()
+        fmt = {".pos": "pos", ".nmea": "nmea", ".nma": "nmea", ".gga": "nmea"}.get(ext, "csv")
+    if fmt == "csv":
+        return read_gnss_csv(p, datum)
+    if fmt == "pos":
+        g = read_rtklib_pos(p)
+    elif fmt == "nmea":
+        g = read_nmea(p)
+    else:
+        raise InputError(p, f"unknown GNSS format '{fmt}' (use csv, pos or nmea)")
+    if datum.lower() != "wgs84":
+        g.lat, g.lon, g.h = _to_wgs84(g.lat, g.lon, g.h, datum, p)
+    return g
