@@ -1,0 +1,213 @@
+"""GNSS-only map matching (selfnav.mapmatch, ``selfnav match``) on real OpenStreetMap roads with
+simulated 5-second floating-car tracks (simulated data, labelled so in the files written)."""
+import itertools
+import json
+
+import networkx as nx
+import numpy as np
+import pytest
+
+from selfnav.cli import main
+from selfnav.io.csvio import read_table, write_csv
+from selfnav.mapmatch import HmmMatcher, _viterbi, node_distances
+from selfnav.roads import packaged_map, project_to_polyline, read_roads
+from selfnav.simulate.car import car_route
+
+
+@pytest.fixture(scope="module")
+def maps():
+    return {n: read_roads(packaged_map(n)) for n in ("kotka_karhula", "helsinki_centre")}
+
+
+def floating_car(g, seed, sigma, duration=1800.0, period=5.0):
+    """A simulated floating-car track: true route and noisy fixes every ``period`` s."""
+    traj, route = car_route(g, duration=duration, dt=period, seed=seed)
+    rng = np.random.default_rng(1000 + seed)
+    noisy = route.xy + rng.normal(0.0, sigma, route.xy.shape)
+    return traj, route, noisy
+
+
+@pytest.mark.parametrize("name", ["kotka_karhula", "helsinki_centre"])
+def test_95_percent_of_fixes_within_5_m_of_the_true_route(maps, name):
+    g = maps[name]
+    shares = []
+    for seed in (11, 12):
+        traj, route, noisy = floating_car(g, seed, sigma=10.0)
+        res = HmmMatcher(g, sigma=10.0).match(traj.t, noisy)
+        assert len(res.t) == len(traj.t)                    # every fix gets a road position
+        _, cross, _ = project_to_polyline(res.xy, route.polyline)
+        shares.append(np.mean(np.abs(cross) < 5.0))
+        # the raw fixes are nowhere near that: the matching does the work
+        _, raw, _ = project_to_polyline(noisy, route.polyline)
+        assert np.mean(np.abs(raw) < 5.0) < 0.6
+    assert min(shares) >= 0.95, shares
+
+
+def test_noise_free_track_is_matched_onto_the_route(maps):
+    g = maps["helsinki_centre"]
+    traj, route = car_route(g, duration=900.0, dt=5.0, seed=3)
+    res = HmmMatcher(g, sigma=5.0).match(traj.t, route.xy)
+    _, cross, _ = project_to_polyline(res.xy, route.polyline)
+    # the car cuts corners by up to a few metres (corner arcs); everywhere else exact
+    e = route.path.element(route.s)
+    straight = route.path.kappa[e] == 0
+    assert np.mean(np.abs(cross[straight]) < 0.01) > 0.97
+    assert np.all(res.in_radius) and res.restart.sum() == 1
+
+
+def test_every_fix_is_matched_even_far_outliers(maps):
+    g = maps["kotka_karhula"]
+    traj, route, noisy = floating_car(g, 5, sigma=10.0, duration=600.0)
+    noisy = noisy.copy()
+    noisy[40] += [600.0, -700.0]                             # far off the map
+    noisy[41:46] += np.random.default_rng(0).normal(0, 200.0, (5, 2))
+    res = HmmMatcher(g, sigma=10.0).match(traj.t, noisy)
+    assert np.all(np.isfinite(res.xy)) and len(res.xy) == len(noisy)
+    # matched points are on the road network: distance to the nearest segment is ~0
+    c = g.candidates(res.xy, 1.0, k=1, per_way=False)
+    assert np.max(c.dist) < 1e-6
+    assert not res.in_radius[40]
+
+
+def test_route_distances_agree_with_networkx(maps):
+    g = maps["helsinki_centre"]
+    rng = np.random.default_rng(2)
+    src = rng.integers(0, g.n_nodes, 40)
+    dst = rng.integers(0, g.n_nodes, 40)
+    d = node_distances(g, src, dst)
+    ref = [nx.shortest_path_length(g.nx, int(a), int(b), weight="length") for a, b in zip(src, dst)]
+    np.testing.assert_allclose(d, ref, rtol=1e-12, atol=1e-9)
+    d_lim = node_distances(g, src, dst, limit=300.0)
+    assert np.all(np.isinf(d_lim[np.asarray(ref) > 300.0]))
+
+
+def test_viterbi_kernel_agrees_with_brute_force():
+    rng = np.random.default_rng(5)
+    sizes = [3, 2, 4, 3, 2]
+    off = np.concatenate([[0], np.cumsum(sizes)])
+    em = rng.normal(0, 2, off[-1])
+    pairs_i, pairs_j, pair_off, logtr = [], [], [0], []
+    table = {}
+    for t in range(len(sizes) - 1):
+        for i in range(off[t], off[t + 1]):
+            for j in range(off[t + 1], off[t + 2]):
+                v = -abs(rng.normal(0, 3))
+                pairs_i.append(i), pairs_j.append(j), logtr.append(v)
+                table[i, j] = v
+        pair_off.append(len(pairs_i))
+    args = [np.asarray(a) for a in (em, off, pair_off, pairs_i, pairs_j, logtr)]
+    path, restart = _viterbi(*args, np.empty(off[-1]), np.empty(off[-1], np.int64))
+    best, best_path = -np.inf, None
+    for combo in itertools.product(*[range(off[t], off[t + 1]) for t in range(len(sizes))]):
+        v = sum(em[k] for k in combo) + sum(table[a, b] for a, b in zip(combo[:-1], combo[1:]))
+        if v > best:
+            best, best_path = v, combo
+    assert tuple(path) == best_path
+    assert restart.tolist() == [True, False, False, False, False]
+
+
+def test_chain_restarts_where_no_transition_is_possible(maps):
+    g = maps["kotka_karhula"]
+    traj, route, noisy = floating_car(g, 6, sigma=5.0, duration=600.0)
+    t = traj.t.copy()
+    t[60:] += 1000.0                                          # a 1000 s gap: max_gap 120 s
+    res = HmmMatcher(g, sigma=5.0).match(t, noisy)
+    assert res.restart[0] and res.restart[60]
+
+
+def _write_track(path, g, traj, xy, sigma):
+    lat, lon = g.to_geodetic(xy[:, 0], xy[:, 1])
+    write_csv(path, {"t": traj.t, "lat_deg": np.degrees(lat), "lon_deg": np.degrees(lon),
+                     "h_m": np.zeros(len(lat)), "sigma_m": np.full(len(lat), sigma)},
+              comments=["simulated 5-s floating-car GNSS track (selfnav tests)"],
+              fmt={"lat_deg": "%.10f", "lon_deg": "%.10f"})
+
+
+def test_cli_match_json_and_output(maps, tmp_path, capsys):
+    g = maps["kotka_karhula"]
+    traj, route, noisy = floating_car(g, 8, sigma=8.0, duration=900.0)
+    gnss = tmp_path / "gnss.csv"
+    _write_track(gnss, g, traj, noisy, 8.0)
+    out = tmp_path / "sol.csv"
+    rc = main(["match", "--gnss", str(gnss), "--map", str(packaged_map("kotka_karhula")),
+               "--out", str(out), "--json"])
+    assert rc == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["fixes"] == len(traj.t) and summary["map_segments"] == 1514
+    assert summary["matched_share"] == 1.0
+    tab = read_table(out, ("t", "lat_deg", "lon_deg", "cross_m"))
+    x, y = g.to_local(np.radians(tab["lat_deg"]), np.radians(tab["lon_deg"]))
+    _, cross, _ = project_to_polyline(np.column_stack([x, y]), route.polyline)
+    assert np.mean(np.abs(cross) < 5.0) >= 0.95
+    assert summary["mean_correction_m"] == pytest.approx(np.mean(tab["cross_m"]), abs=1e-3)
+    assert "OpenStreetMap" in out.read_text().splitlines()[2]
+
+
+def test_cli_match_errors_are_one_line(tmp_path, capsys, maps):
+    gnss = tmp_path / "far.csv"
+    write_csv(gnss, {"t": [0.0, 1.0], "lat_deg": [55.75, 55.75], "lon_deg": [37.61, 37.62]})
+    bad_map = tmp_path / "bad.osm.pbf"
+    bad_map.write_bytes(b"\x00\x01garbage")
+    cases = [
+        (["--map", str(packaged_map("kotka_karhula"))], "none of the 2 fixes"),
+        (["--map", str(bad_map)], "cannot be read"),
+        (["--map", str(tmp_path / "missing.osm")], "no such map"),
+    ]
+    for extra, msg in cases:
+        rc = main(["match", "--gnss", str(gnss), "--out", str(tmp_path / "o.csv"), *extra])
+        err = capsys.readouterr().err.strip()
+        assert rc == 2 and err.startswith("selfnav: error:") and msg in err
+        assert len(err.splitlines()) == 1
+    assert not (tmp_path / "o.csv").exists()
+
+
+def test_snap_to_road_uses_the_direction_of_travel(maps):
+    from selfnav.mapmatch import snap_to_road
+
+    g = maps["helsinki_centre"]
+    two_way = np.flatnonzero((g.seg_twin >= 0) & (g.seg_len > 30))[0]
+    mid = g.segment_points([two_way], [g.seg_len[two_way] / 2])[0]
+    normal = np.array([-np.cos(g.seg_heading[two_way]), np.sin(g.seg_heading[two_way])])  # left
+    p = mid + 2.0 * normal
+    h = g.seg_heading[two_way]
+    foot, seg, cross, rh = snap_to_road(g, [p, p], [h, h + np.pi], radius=10.0)
+    assert seg[0] == two_way and seg[1] == g.seg_twin[two_way]
+    np.testing.assert_allclose(foot[0], mid, atol=1e-9)
+    assert cross[0] == pytest.approx(2.0) and cross[1] == pytest.approx(-2.0)
+    assert rh[1] == pytest.approx((h + np.pi) % (2 * np.pi))
+    one_way = np.flatnonzero((g.seg_twin < 0) & (g.seg_len > 30))[0]
+    q = g.segment_points([one_way], [g.seg_len[one_way] / 2])
+    _, s_ok, _, _ = snap_to_road(g, q, g.seg_heading[one_way], radius=3.0)
+    _, s_no, _, _ = snap_to_road(g, q, g.seg_heading[one_way] + np.pi, radius=3.0)
+    assert s_ok[0] == one_way and s_no[0] != one_way
+
+
+def test_cli_match_reads_and_writes_other_datums(maps, tmp_path, capsys):
+    from selfnav.datum import convert
+
+    g = maps["kotka_karhula"]
+    traj, route, noisy = floating_car(g, 9, sigma=5.0, duration=300.0)
+    lat, lon = g.to_geodetic(noisy[:, 0], noisy[:, 1])
+    wgs = tmp_path / "wgs.csv"
+    _write_track(wgs, g, traj, noisy, 5.0)
+    la42, lo42, h42 = convert(lat, lon, np.zeros(len(lat)), "wgs84", "sk42")
+    sk = tmp_path / "sk42.csv"
+    write_csv(sk, {"t": traj.t, "lat_deg": np.degrees(la42), "lon_deg": np.degrees(lo42),
+                   "h_m": h42}, comments=["simulated, SK-42"],
+              fmt={"lat_deg": "%.10f", "lon_deg": "%.10f"})
+    m = str(packaged_map("kotka_karhula"))
+    assert main(["match", "--gnss", str(wgs), "--map", m, "--out", str(tmp_path / "a.csv")]) == 0
+    assert main(["match", "--gnss", str(sk), "--map", m, "--out", str(tmp_path / "b.csv"),
+                 "--gnss-datum", "sk42", "--out-datum", "sk42"]) == 0
+    capsys.readouterr()
+    a = read_table(tmp_path / "a.csv", ("lat_deg", "lon_deg"))
+    b = read_table(tmp_path / "b.csv", ("lat_deg", "lon_deg"))
+    # the SK-42 output converted back to WGS-84 is the WGS-84 run's output (SK-42 differs by
+    # ~100 m here, so a datum ignored would show)
+    la, lo, _ = convert(np.radians(b["lat_deg"]), np.radians(b["lon_deg"]),
+                        np.zeros(len(b["lat_deg"])), "sk42", "wgs84")
+    x1, y1 = g.to_local(np.radians(a["lat_deg"]), np.radians(a["lon_deg"]))
+    x2, y2 = g.to_local(la, lo)
+    assert np.max(np.hypot(x1 - x2, y1 - y2)) < 0.05
+    x3, y3 = g.to_local(np.radians(b["lat_deg"]), np.radians(b["lon_deg"]))
+    assert np.median(np.hypot(x1 - x3, y1 - y3)) > 20.0
