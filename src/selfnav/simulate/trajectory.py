@@ -46,12 +46,15 @@ class Trajectory:
 
 def write_truth(path, traj: Trajectory, comments=()):
     """Write a truth/solution CSV (DESIGN §6) atomically."""
-    roll, pitch, heading = traj.euler()
-    cols = {
-        "t": traj.t, "lat_deg": np.degrees(traj.lat), "lon_deg": np.degrees(traj.lon), "h_m": traj.h,
-        "ve": traj.velocity_n[:, 0], "vn": traj.velocity_n[:, 1], "vu": traj.velocity_n[:, 2],
-        "roll_deg": np.degrees(roll), "pitch_deg": np.degrees(pitch), "heading_deg": np.degrees(heading),
-    }
+    cols = {"t": traj.t, "lat_deg": np.degrees(traj.lat), "lon_deg": np.degrees(traj.lon),
+            "h_m": traj.h}
+    # unknown velocity or attitude (NaN) is left out rather than written as nan
+    if np.all(np.isfinite(traj.velocity_n)):
+        cols.update(ve=traj.velocity_n[:, 0], vn=traj.velocity_n[:, 1], vu=traj.velocity_n[:, 2])
+    if np.all(np.isfinite(traj.C_nb)):
+        roll, pitch, heading = traj.euler()
+        cols.update(roll_deg=np.degrees(roll), pitch_deg=np.degrees(pitch),
+                    heading_deg=np.degrees(heading))
     fmt = {k: "%.10f" for k in ("lat_deg", "lon_deg")}
     return write_csv(path, cols, comments=[traj.source, *comments], fmt=fmt)
 

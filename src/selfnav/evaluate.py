@@ -1,0 +1,277 @@
+"""Evaluation of a navigation solution against truth (DESIGN §6 ``selfnav evaluate``).
+
+The truth is interpolated onto the solution's times (only the overlap counts); each solution
+point's error is the ECEF difference rotated into the local ENU frame at the truth point, in
+metres. Metrics:
+
+* horizontal error ``sqrt(e_E² + e_N²)``: RMS, 95th percentile (linear interpolation between
+  order statistics), maximum and mean;
+* vertical error ``e_U``: RMS and maximum of its magnitude;
+* along- and cross-track components relative to the **truth heading** (always): along is
+  positive ahead of the truth, cross positive to the right of the direction of travel; the truth
+  heading is the file's ``heading_deg`` when present, else the direction of its velocity
+  (``ve, vn``), else of its position differences; epochs where it is unknown (standing still with
+  no attitude) are left out of these two;
+* the same two relative to a **road polyline** when one is given (the direction of the nearest
+  road segment to the truth point, oriented along the truth heading).
+
+Everything is WGS-84; convert other datums first (:mod:`selfnav.datum`).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from selfnav.earth import WGS84, geodetic_to_ecef
+from selfnav.errors import SelfnavError
+from selfnav.simulate.trajectory import Trajectory
+
+#: Speed below which the direction of motion is not trusted as a heading, m/s.
+MIN_SPEED = 0.2
+
+
+def enu_matrices(lat, lon):
+    """ECEF -> ENU rotation for each point, shape ``(N, 3, 3)`` (rows East, North, Up)."""
+    lat = np.atleast_1d(np.asarray(lat, dtype=float))
+    lon = np.atleast_1d(np.asarray(lon, dtype=float))
+    sl, cl, so, co = np.sin(lat), np.cos(lat), np.sin(lon), np.cos(lon)
+    z = np.zeros_like(lat)
+    return np.stack([np.stack([-so, co, z], -1),
+                     np.stack([-sl * co, -sl * so, cl], -1),
+                     np.stack([cl * co, cl * so, sl], -1)], axis=-2)
+
+
+def _interp_angle(t_new, t, a):
+    """Interpolate angles (rad) through their unit vectors; NaN stays NaN."""
+    c = np.interp(t_new, t, np.cos(a))
+    s = np.interp(t_new, t, np.sin(a))
+    out = np.arctan2(s, c)
+    bad = np.interp(t_new, t, np.isnan(a).astype(float)) > 0
+    out[bad | (np.hypot(c, s) < 1e-6)] = np.nan
+    return out
+
+
+def _fill_nearest(x):
+    """Fill NaN with the nearest valid value before or after (ffill, then bfill)."""
+    x = np.array(x, dtype=float)
+    ok = np.isfinite(x)
+    if not ok.any():
+        return x
+    idx = np.where(ok, np.arange(len(x)), -1)
+    idx = np.maximum.accumulate(idx)
+    first = int(np.argmax(ok))
+    idx[:first] = first
+    return x[idx]
+
+
+def truth_heading(truth: Trajectory):
+    """Heading of the truth at its own samples, rad clockwise from North (NaN where unknown).
+
+    Attitude heading when the file has it; else the velocity direction; else the direction of
+    position differences. Samples slower than :data:`MIN_SPEED` take the nearest moving sample's
+    direction (a stop keeps the heading it arrived with).
+    """
+    if np.all(np.isfinite(truth.C_nb)):
+        return truth.euler()[2]
+    if np.all(np.isfinite(truth.velocity_n[:, :2])):
+        ve, vn = truth.velocity_n[:, 0], truth.velocity_n[:, 1]
+    else:
+        if len(truth) < 2:
+            return np.full(len(truth), np.nan)
+        x = geodetic_to_ecef(truth.lat, truth.lon, truth.h, WGS84)
+        E = enu_matrices(truth.lat, truth.lon)
+        d = np.gradient(x, truth.t, axis=0)
+        v = np.einsum("nij,nj->ni", E, d)
+        ve, vn = v[:, 0], v[:, 1]
+    hdg = np.where(np.hypot(ve, vn) >= MIN_SPEED, np.arctan2(ve, vn), np.nan)
+    return _fill_nearest(hdg)
+
+
+@dataclass
+class Evaluation:
+    """Errors of a solution at its own times (only the overlap with the truth).
+
+    Attributes
+    ----------
+    t : (N,) s
+    error_enu : (N, 3) m, solution minus truth in the truth point's ENU frame
+    along, cross : (N,) m, relative to the truth heading (NaN where unknown)
+    road_along, road_cross : (N,) m or None, relative to the road
+    truth_lat, truth_lon, truth_h, sol_lat, sol_lon, sol_h : (N,) rad, rad, m
+    heading : (N,) rad, truth heading used
+    metrics : dict
+    warnings : list of str
+    """
+
+    t: np.ndarray
+    error_enu: np.ndarray
+    along: np.ndarray
+    cross: np.ndarray
+    truth_lat: np.ndarray
+    truth_lon: np.ndarray
+    truth_h: np.ndarray
+    sol_lat: np.ndarray
+    sol_lon: np.ndarray
+    sol_h: np.ndarray
+    heading: np.ndarray
+    road_along: np.ndarray | None = None
+    road_cross: np.ndarray | None = None
+    metrics: dict = field(default_factory=dict)
+    warnings: list = field(default_factory=list)
+
+    @property
+    def horizontal(self) -> np.ndarray:
+        return np.hypot(self.error_enu[:, 0], self.error_enu[:, 1])
+
+
+def _rms(x):
+    x = np.asarray(x, dtype=float)
+    x = x[np.isfinite(x)]
+    return float(np.sqrt(np.mean(x * x))) if x.size else float("nan")
+
+
+def error_metrics(error_enu, along=None, cross=None, road_along=None, road_cross=None) -> dict:
+    """The metric dictionary of ``selfnav evaluate`` from error components (m)."""
+    e = np.asarray(error_enu, dtype=float)
+    hor = np.hypot(e[:, 0], e[:, 1])
+    m = {
+        "horizontal_rms_m": _rms(hor),
+        "horizontal_p95_m": float(np.percentile(hor, 95)),
+        "horizontal_max_m": float(np.max(hor)),
+        "horizontal_mean_m": float(np.mean(hor)),
+        "vertical_rms_m": _rms(e[:, 2]),
+        "vertical_max_m": float(np.max(np.abs(e[:, 2]))),
+        "east_mean_m": float(np.mean(e[:, 0])),
+        "north_mean_m": float(np.mean(e[:, 1])),
+        "up_mean_m": float(np.mean(e[:, 2])),
+    }
+    for name, x in (("along_track", along), ("cross_track", cross),
+                    ("road_along_track", road_along), ("road_cross_track", road_cross)):
+        if x is None:
+            continue
+        ok = np.isfinite(x)
+        m[f"{name}_rms_m"] = _rms(x)
+        m[f"{name}_mean_m"] = float(np.mean(x[ok])) if ok.any() else float("nan")
+        m[f"{name}_max_m"] = float(np.max(np.abs(x[ok]))) if ok.any() else float("nan")
+    return m
+
+
+def _local_xy(lat, lon, lat0, lon0):
+    """East/North metres of points in the tangent plane at (lat0, lon0) (for road geometry)."""
+    x = geodetic_to_ecef(lat, lon, 0.0, WGS84) - geodetic_to_ecef(lat0, lon0, 0.0, WGS84)
+    return (x @ enu_matrices(lat0, lon0)[0].T)[..., :2]
+
+
+def road_direction(points_xy, roads_xy, chunk: int = 2_000_000):
+    """Unit direction (E, N) of the nearest road segment to each point, and the distance.
+
+    Parameters
+    ----------
+    points_xy : (N, 2) m
+    roads_xy : list of (M_i, 2) m polylines
+    """
+    a = np.concatenate([r[:-1] for r in roads_xy if len(r) >= 2])
+    b = np.concatenate([r[1:] for r in roads_xy if len(r) >= 2])
+    d = b - a
+    L2 = np.einsum("ij,ij->i", d, d)
+    keep = L2 > 0
+    a, d, L2 = a[keep], d[keep], L2[keep]
+    if len(a) == 0:
+        raise SelfnavError("the road geometry has no segment of non-zero length")
+    n = len(points_xy)
+    best = np.empty(n, dtype=int)
+    dist = np.empty(n)
+    step = max(1, chunk // len(a))
+    for i in range(0, n, step):
+        p = points_xy[i:i + step, None, :]
+        s = np.clip(np.einsum("nsk,sk->ns", p - a, d) / L2, 0.0, 1.0)
+        q = a + s[..., None] * d
+        r2 = np.sum((p - q) ** 2, axis=-1)
+        j = np.argmin(r2, axis=1)
+        best[i:i + step] = j
+        dist[i:i + step] = np.sqrt(r2[np.arange(len(j)), j])
+    u = d[best] / np.sqrt(L2[best])[:, None]
+    return u, dist
+
+
+def along_cross(error_en, direction_en):
+    """Along (ahead +) and cross (right +) components of horizontal errors, m."""
+    u = np.asarray(direction_en, dtype=float)
+    e = np.asarray(error_en, dtype=float)
+    along = e[:, 0] * u[:, 0] + e[:, 1] * u[:, 1]
+    cross = e[:, 0] * u[:, 1] - e[:, 1] * u[:, 0]
+    return along, cross
+
+
+def evaluate(truth: Trajectory, solution: Trajectory, *, roads=None,
+             truth_name: str = "truth", solution_name: str = "solution") -> Evaluation:
+    """Errors of ``solution`` against ``truth`` (module docstring).
+
+    Parameters
+    ----------
+    truth, solution : Trajectory
+        WGS-84 geodetic, as :func:`selfnav.simulate.trajectory.read_truth` returns them.
+    roads : list of (M_i, 2) arrays, optional
+        Road polylines as ``(lat, lon)`` in rad (WGS-84); enables road-relative along/cross.
+    """
+    if len(truth) < 2:
+        raise SelfnavError(f"{truth_name}: at least two samples are needed to interpolate")
+    t0, t1 = truth.t[0], truth.t[-1]
+    inside = (solution.t >= t0) & (solution.t <= t1)
+    if not inside.any():
+        raise SelfnavError(
+            f"time spans do not overlap: {truth_name} covers {t0:.3f}..{t1:.3f} s, "
+            f"{solution_name} {solution.t[0]:.3f}..{solution.t[-1]:.3f} s (same time base?)")
+    warnings = []
+    n_out = int((~inside).sum())
+    if n_out:
+        warnings.append(f"{n_out} of {len(solution)} solution epochs lie outside the truth's "
+                        "time span and are not evaluated")
+    t = solution.t[inside]
+    tl = np.interp(t, truth.t, truth.lat)
+    tlon = _interp_angle(t, truth.t, truth.lon)
+    th = np.interp(t, truth.t, truth.h)
+    sl, slon, sh = solution.lat[inside], solution.lon[inside], solution.h[inside]
+    d = geodetic_to_ecef(sl, slon, sh, WGS84) - geodetic_to_ecef(tl, tlon, th, WGS84)
+    e = np.einsum("nij,nj->ni", enu_matrices(tl, tlon), d)
+    hdg = _interp_angle(t, truth.t, truth_heading(truth))
+    along, cross = along_cross(e, np.column_stack([np.sin(hdg), np.cos(hdg)]))
+    if np.isnan(hdg).all():
+        warnings.append("the truth has no heading, velocity or motion: along/cross-track omitted")
+    ra = rc = None
+    if roads is not None:
+        lat0, lon0 = tl[0], tlon[0]
+        rxy = [_local_xy(r[:, 0], r[:, 1], lat0, lon0) for r in roads]
+        u, dist = road_direction(_local_xy(tl, tlon, lat0, lon0), rxy)
+        flip = u[:, 0] * np.sin(hdg) + u[:, 1] * np.cos(hdg) < 0
+        u[flip] *= -1.0
+        ra, rc = along_cross(e, u)
+        far = dist > 50.0
+        if far.any():
+            warnings.append(f"{int(far.sum())} truth points are more than 50 m from any road")
+    m = error_metrics(e, along, cross, ra, rc)
+    m.update({"samples": int(len(t)), "duration_s": float(t[-1] - t[0]),
+              "solution_samples": int(len(solution)), "t_start_s": float(t[0]),
+              "t_end_s": float(t[-1])})
+    return Evaluation(t, e, along, cross, tl, tlon, th, sl, slon, sh, hdg, ra, rc, m, warnings)
+
+
+def load_road_polylines(path):
+    """Road polylines ``[(M_i, 2) (lat, lon) rad]`` from a map file through :mod:`selfnav.roads`.
+
+    The hook for ``--map``: it needs ``selfnav.roads.road_polylines(path)`` (same return
+    contract). Raises :class:`SelfnavError` with one line when the roads module is absent.
+    """
+    import importlib
+
+    try:
+        roads = importlib.import_module("selfnav.roads")
+    except ImportError:
+        raise SelfnavError("--map needs the selfnav.roads module, which this installation "
+                           "lacks") from None
+    fn = getattr(roads, "road_polylines", None)
+    if fn is None:
+        raise SelfnavError("selfnav.roads has no road_polylines(path): road-relative "
+                           "along/cross-track is not available yet")
+    return [np.asarray(r, dtype=float) for r in fn(path)]

@@ -1,0 +1,159 @@
+"""Plots and a self-contained HTML page for an evaluation (``selfnav evaluate --report DIR``).
+
+Figures are drawn with matplotlib's Agg backend (no display needed), written as PNG and embedded
+in ``report.html`` as base64 data so that the page is one file that can be mailed or archived.
+Every file is written atomically (temporary file moved into place).
+"""
+from __future__ import annotations
+
+import base64
+import html
+import io
+import json
+from pathlib import Path
+
+import numpy as np
+
+from selfnav.io.csvio import atomic_write_bytes
+
+
+def _pyplot():
+    import matplotlib
+
+    matplotlib.use("Agg", force=False)
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def _png(fig) -> bytes:
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=110, bbox_inches="tight")
+    _pyplot().close(fig)
+    return buf.getvalue()
+
+
+def error_figure(ev) -> bytes:
+    """Error against time: horizontal, East/North/Up, along/cross-track. PNG bytes."""
+    plt = _pyplot()
+    has_road = ev.road_along is not None
+    fig, axes = plt.subplots(3, 1, figsize=(9, 8), sharex=True)
+    t = ev.t - ev.t[0]
+    hor = ev.horizontal
+    ax = axes[0]
+    ax.plot(t, hor, lw=1, color="k", label="horizontal")
+    ax.axhline(ev.metrics["horizontal_rms_m"], color="C3", ls="--", lw=1,
+               label=f"RMS {ev.metrics['horizontal_rms_m']:.3g} m")
+    ax.axhline(ev.metrics["horizontal_p95_m"], color="C1", ls=":", lw=1,
+               label=f"95 % {ev.metrics['horizontal_p95_m']:.3g} m")
+    ax.set_ylabel("horizontal error, m")
+    ax.legend(loc="upper right", fontsize=8)
+    ax = axes[1]
+    for k, name in enumerate(("East", "North", "Up")):
+        ax.plot(t, ev.error_enu[:, k], lw=1, label=name)
+    ax.set_ylabel("error, m")
+    ax.legend(loc="upper right", fontsize=8)
+    ax = axes[2]
+    ax.plot(t, ev.along, lw=1, label="along-track (truth heading)")
+    ax.plot(t, ev.cross, lw=1, label="cross-track (truth heading)")
+    if has_road:
+        ax.plot(t, ev.road_along, lw=1, ls="--", label="along-track (road)")
+        ax.plot(t, ev.road_cross, lw=1, ls="--", label="cross-track (road)")
+    ax.set_ylabel("error, m")
+    ax.set_xlabel(f"time since {ev.t[0]:.3f} s, s")
+    ax.legend(loc="upper right", fontsize=8)
+    for a in axes:
+        a.grid(alpha=0.3)
+    fig.suptitle("Solution minus truth")
+    return _png(fig)
+
+
+def track_figure(ev, roads=None) -> bytes:
+    """Truth and solution tracks in local East/North metres, over the road map when given."""
+    from selfnav.evaluate import _local_xy
+
+    plt = _pyplot()
+    lat0, lon0 = ev.truth_lat[0], ev.truth_lon[0]
+    txy = _local_xy(ev.truth_lat, ev.truth_lon, lat0, lon0)
+    sxy = _local_xy(ev.sol_lat, ev.sol_lon, lat0, lon0)
+    fig, ax = plt.subplots(figsize=(7, 7))
+    if roads:
+        lo, hi = np.minimum(txy.min(0), sxy.min(0)), np.maximum(txy.max(0), sxy.max(0))
+        pad = 0.1 * max(float(np.max(hi - lo)), 50.0)
+        drawn = 0
+        for r in roads:
+            xy = _local_xy(r[:, 0], r[:, 1], lat0, lon0)
+            if np.any((xy >= lo - pad).all(1) & (xy <= hi + pad).all(1)):
+                ax.plot(xy[:, 0], xy[:, 1], color="0.75", lw=2, zorder=0,
+                        label="roads (map)" if drawn == 0 else None)
+                drawn += 1
+        ax.set_xlim(lo[0] - pad, hi[0] + pad)
+        ax.set_ylim(lo[1] - pad, hi[1] + pad)
+    ax.plot(txy[:, 0], txy[:, 1], color="k", lw=1.5, label="truth")
+    ax.plot(sxy[:, 0], sxy[:, 1], color="C3", lw=1, label="solution")
+    ax.plot(txy[0, 0], txy[0, 1], "go", ms=6, label="start")
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_xlabel("East, m")
+    ax.set_ylabel("North, m")
+    ax.set_title(f"Track around {np.degrees(lat0):.6f}°, {np.degrees(lon0):.6f}° (WGS-84)")
+    ax.grid(alpha=0.3)
+    ax.legend(loc="best", fontsize=8)
+    return _png(fig)
+
+
+def _table(metrics: dict) -> str:
+    rows = []
+    for k, v in metrics.items():
+        if isinstance(v, float):
+            v = f"{v:.4g}" if np.isfinite(v) else "—"
+        rows.append(f"<tr><th>{html.escape(str(k))}</th><td>{html.escape(str(v))}</td></tr>")
+    return "<table>\n" + "\n".join(rows) + "\n</table>"
+
+
+def html_page(title: str, metrics: dict, figures: dict, notes=()) -> str:
+    """A self-contained HTML page: the metric table and the PNG figures as base64 images."""
+    imgs = "\n".join(
+        f'<figure><img alt="{html.escape(name)}" src="data:image/png;base64,'
+        f'{base64.b64encode(png).decode("ascii")}"><figcaption>{html.escape(name)}</figcaption>'
+        "</figure>" for name, png in figures.items())
+    note = "".join(f"<li>{html.escape(str(n))}</li>" for n in notes)
+    return f"""<!DOCTYPE html>
+<html lang="en"><head><meta charset="utf-8"><title>{html.escape(title)}</title>
+<style>body{{font-family:sans-serif;max-width:960px;margin:2em auto;color:#222}}
+table{{border-collapse:collapse}}th,td{{border:1px solid #ccc;padding:3px 8px;text-align:left}}
+td{{font-family:monospace;text-align:right}}img{{max-width:100%}}</style></head>
+<body><h1>{html.escape(title)}</h1>
+<h2>Metrics</h2>
+{_table(metrics)}
+{f'<h2>Notes</h2><ul>{note}</ul>' if note else ''}
+<h2>Figures</h2>
+{imgs}
+<p><small>Generated by selfnav. Map data © OpenStreetMap contributors (ODbL) where a map is
+shown.</small></p>
+</body></html>
+"""
+
+
+def write_report(ev, out_dir, *, roads=None, title: str = "selfnav evaluation",
+                 sources: dict | None = None) -> dict:
+    """Write ``errors.png``, ``track.png``, ``metrics.json`` and ``report.html`` into out_dir.
+
+    Returns ``{name: path}`` of the files written.
+    """
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    figs = {"errors.png": error_figure(ev), "track.png": track_figure(ev, roads)}
+    paths = {}
+    for name, png in figs.items():
+        paths[name] = str(atomic_write_bytes(out / name, png))
+    metrics = dict(ev.metrics)
+    if sources:
+        metrics = {**{k: str(v) for k, v in sources.items()}, **metrics}
+    clean = {k: (None if isinstance(v, float) and not np.isfinite(v) else v)
+             for k, v in metrics.items()}
+    paths["metrics.json"] = str(atomic_write_bytes(
+        out / "metrics.json", json.dumps(clean, indent=2, default=float).encode()))
+    page = html_page(title, metrics, {"Error against time": figs["errors.png"],
+                                      "Track": figs["track.png"]}, ev.warnings)
+    paths["report.html"] = str(atomic_write_bytes(out / "report.html", page.encode("utf-8")))
+    return paths
