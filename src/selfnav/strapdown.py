@@ -316,10 +316,12 @@ class Strapdown:
         self.h_ref = np.asarray(h if h_ref is None else h_ref, dtype=float)
 
     # ---- state access
-    def set_state(self, *, lat=None, lon=None, h=None, velocity_n=None, C_nb=None):
+    def set_state(self, *, lat=None, lon=None, h=None, velocity_n=None, C_nb=None, check=True):
         """Overwrite parts of the state (a correction from an aiding filter).
 
         The extrapolation history keeps the last *increments*, so a reset does not disturb it.
+        ``check=False`` skips the rotation-matrix test (for callers that build ``C_nb`` from
+        rotations, e.g. a filter correcting at every step).
         """
         s = self._s
         if lat is not None:
@@ -332,7 +334,7 @@ class Strapdown:
             s[3:6] = np.asarray(velocity_n, dtype=float).reshape(3)
         if C_nb is not None:
             C = np.asarray(C_nb, dtype=float).reshape(3, 3)
-            if not np.allclose(C @ C.T, np.eye(3), atol=1e-6):
+            if check and not np.allclose(C @ C.T, np.eye(3), atol=1e-6):
                 raise SelfnavError("C_nb is not a rotation matrix")
             s[6:15] = C.T.reshape(9)
 

@@ -1,0 +1,148 @@
+"""``selfnav navigate``: INS/GNSS navigation (DESIGN §5, §6) — the EKF (+ RTS smoother)."""
+from __future__ import annotations
+
+import sys
+import time
+from pathlib import Path
+from typing import Optional
+
+import numpy as np
+import typer
+
+from selfnav.cli.common import emit_json
+from selfnav.errors import SelfnavError
+
+
+def _vec3(text: str, name: str) -> np.ndarray:
+    try:
+        v = np.array([float(x) for x in text.split(",")])
+    except ValueError:
+        raise SelfnavError(f"{name} must be three numbers separated by commas, got '{text}'") from None
+    if v.shape != (3,):
+        raise SelfnavError(f"{name} must be three numbers separated by commas, got '{text}'")
+    return v
+
+
+def read_imu_any(path: Path, fmt: str, time_offset: float = 0.0):
+    """IMU in any supported format (csv, psins, rtklibexplorer, kfgins)."""
+    from selfnav.io import read_imu
+
+    if fmt == "rtklibexplorer":
+        from selfnav.io.rtklibexplorer import read_rtklibexplorer_imu
+
+        # upstream's own offset (−0.125 s) plus the user's
+        return read_rtklibexplorer_imu(path, t_offset=-0.125 + time_offset)
+    if fmt == "kfgins":
+        try:
+            from selfnav.io.kfgins import read_kfgins_imu
+        except ImportError:
+            raise SelfnavError("the KF-GINS reader is not available in this build") from None
+        imu = read_kfgins_imu(path)
+    else:
+        imu = read_imu(path, fmt)
+    if time_offset:
+        imu.t = imu.t + time_offset
+    return imu
+
+
+def write_solution(path: Path, res, *, datum: str = "wgs84", comments=()):
+    """SOL file: DESIGN §6 columns plus 1σ position, m."""
+    from selfnav import attitude as att
+    from selfnav.io import write_csv
+
+    tr = res.trajectory
+    lat, lon, h = tr.lat, tr.lon, tr.h
+    if datum.lower() != "wgs84":
+        from selfnav import datum as dm
+
+        lat, lon, h = dm.convert(lat, lon, h, "wgs84", datum)
+    roll, pitch, hdg = att.euler_from_dcm_nb(tr.C_nb)
+    cols = {"t": tr.t, "lat_deg": np.degrees(lat), "lon_deg": np.degrees(lon), "h_m": h,
+            "ve": tr.velocity_n[:, 0], "vn": tr.velocity_n[:, 1], "vu": tr.velocity_n[:, 2],
+            "roll_deg": np.degrees(roll), "pitch_deg": np.degrees(pitch),
+            "heading_deg": np.degrees(hdg), "sigma_e_m": res.sigma_enu[:, 0],
+            "sigma_n_m": res.sigma_enu[:, 1], "sigma_u_m": res.sigma_enu[:, 2]}
+    fmt = {"t": "%.4f", "lat_deg": "%.9f", "lon_deg": "%.9f", "h_m": "%.3f"}
+    return write_csv(path, cols, comments=list(comments), fmt=fmt)
+
+
+def register(app: typer.Typer) -> None:
+    @app.command("navigate")
+    def navigate_cmd(
+        imu: Path = typer.Option(..., "--imu", help="IMU file."),
+        gnss: Path = typer.Option(..., "--gnss", help="GNSS fixes (csv, RTKLIB .pos, NMEA)."),
+        out: Path = typer.Option(..., "--out", help="Solution CSV (written atomically)."),
+        method: str = typer.Option("ekf", help="ekf (error-state Kalman filter) or seed."),
+        map_: Optional[Path] = typer.Option(None, "--map", help="Road map (.osm/.osm.pbf)."),
+        smooth: bool = typer.Option(False, "--smooth", help="RTS smoother (post-processing)."),
+        imu_format: str = typer.Option("auto", help="csv, psins, rtklibexplorer, kfgins, auto."),
+        gnss_format: str = typer.Option("auto", help="csv, pos, nmea, auto (by extension)."),
+        gnss_datum: str = typer.Option("wgs84", help="Datum of the GNSS file: wgs84, pz90.11, pz90, sk42."),
+        out_datum: str = typer.Option("wgs84", help="Datum of the solution file."),
+        grade: str = typer.Option("consumer", help="IMU noise model: navigation, tactical, "
+                                  "industrial, consumer, consumer-car."),
+        lever_arm: str = typer.Option("0,0,0", help="IMU-to-antenna lever arm, body RFU, m: x,y,z."),
+        imu_time_offset: float = typer.Option(0.0, help="Added to the IMU time stamps, s."),
+        no_window_test: bool = typer.Option(False, help="Only the χ² gate (for comparison)."),
+        no_nhc: bool = typer.Option(False, help="No non-holonomic constraint (not a car)."),
+        scale_factors: bool = typer.Option(False, help="Estimate scale factors (21 states)."),
+        as_json: bool = typer.Option(False, "--json", help="Print one JSON object."),
+    ):
+        """Navigate with an IMU and GNSS; survives unflagged GNSS outliers (window test)."""
+        from selfnav import ekf
+        from selfnav.io.gnss import read_gnss
+
+        if method not in ("ekf", "seed"):
+            raise SelfnavError(f"unknown method '{method}' (use ekf or seed)")
+        if method == "seed" or map_ is not None:
+            raise SelfnavError("the seed 004 road navigator and map aiding are not built yet "
+                               "(issue 5); use --method ekf without --map")
+        fmt = imu_format
+        if fmt == "auto":
+            name = imu.name.lower()
+            fmt = ("psins" if name.endswith((".imu", ".imu.gz"))
+                   else "rtklibexplorer" if imu.with_name(imu.name + ".tag").exists() else "csv")
+        data = read_imu_any(imu, fmt, imu_time_offset)
+        g = read_gnss(gnss, gnss_format, gnss_datum)
+        if g.t[-1] < data.t[0] or g.t[0] > data.t[-1]:
+            raise SelfnavError(f"the GNSS times ({g.t[0]:.3f}…{g.t[-1]:.3f} s) and the IMU times "
+                               f"({data.t[0]:.3f}…{data.t[-1]:.3f} s) do not overlap: different "
+                               "time bases (GPS seconds of week vs seconds of day?)")
+        cfg = ekf.FilterConfig.for_grade(grade, lever_arm_b=_vec3(lever_arm, "--lever-arm"),
+                                         robust=not no_window_test, nhc=not no_nhc)
+        if scale_factors:
+            cfg.scale_factors = True
+        t0 = time.perf_counter()
+        progress = None
+        bar = None
+        if not as_json and sys.stderr.isatty():
+            from rich.progress import Progress
+
+            bar = Progress(transient=True, console=None)
+            bar.start()
+            task = bar.add_task("navigating", total=1.0)
+
+            def progress(x):
+                bar.update(task, completed=x)
+        try:
+            res = ekf.run_filter(data, g, cfg, smooth=smooth, progress=progress)
+        finally:
+            if bar is not None:
+                bar.stop()
+        elapsed = time.perf_counter() - t0
+        write_solution(out, res, datum=out_datum, comments=[
+            f"selfnav navigate --method ekf{' --smooth' if smooth else ''}; imu {imu.name}; "
+            f"gnss {gnss.name}; datum {out_datum}"])
+        span = float(data.t[-1] - data.t[0])
+        summary = {"method": "ekf", "smoothed": smooth, "epochs": len(res.trajectory.t),
+                   "imu_samples": len(data), "duration_s": span, "seconds": elapsed,
+                   "real_time_factor": span / max(elapsed, 1e-9), **res.stats,
+                   "suspect_fixes": int(np.sum(res.mode == 1)), "out": str(out)}
+        if as_json:
+            emit_json(summary)
+            return
+        print(f"{out}: {summary['epochs']} epochs over {span:.1f} s, {elapsed:.1f} s "
+              f"({summary['real_time_factor']:.0f}× real time)")
+        print(f"  GNSS fixes: {res.stats['accepted']} accepted, {res.stats['rejected']} rejected, "
+              f"{res.stats['before_init']} before initialisation, "
+              f"{res.stats['degraded_updates']} used with inflated σ while suspect")
