@@ -1,0 +1,567 @@
+"""Running the INS/GNSS filter: initialisation, the outlier defence, streaming and batch use.
+
+:class:`StreamingNavigator` takes IMU samples and GNSS fixes as they arrive (``add_imu``,
+``add_gnss``) and processes every epoch once the IMU stream has passed it: the aiding epochs
+(non-holonomic constraint or zero-velocity update, a road constraint), the GNSS fixes and any
+heading measurements, in the order (time, kind). :func:`run_filter` is the batch call: it
+feeds a whole record through the same class, so both give identical results.
+
+The outlier defence (DESIGN §7; see :mod:`selfnav.ekf`): each fix passes a soft χ² gate
+(up to ``soft_gate × gate`` with R inflated, Huber-like) *and* the window test: its
+displacement from the previous fix must agree with the INS displacement by propagation
+(``disp``; the corrections of updates are not motion). After ``suspect_after`` rejections the
+filter is *suspect*: it dead-reckons, uses white outliers with their own robust scale
+(``degraded``), and re-acquires when a window of fixes is self-consistent.
+"""
+from __future__ import annotations
+
+import heapq
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from selfnav import attitude as att
+from selfnav.earth import normal_gravity, radii
+from selfnav.ekf import (CHI2_3_999, IP, IR, IV, FilterConfig, InsGnssFilter, _enu_offset, _pack,
+                         _rts, _unpack)
+from selfnav.errors import SelfnavError
+from selfnav.io.gnss import GnssData
+from selfnav.simulate.trajectory import Trajectory
+
+@dataclass
+class FilterResult:
+    """Output of :func:`run_filter` (and of the smoother)."""
+
+    trajectory: Trajectory
+    sigma_enu: np.ndarray         # (N, 3) position σ, m
+    sigma_vel: np.ndarray         # (N, 3)
+    sigma_att: np.ndarray         # (N, 3) rad (ψ E, N, U)
+    gyro_bias: np.ndarray         # (N, 3)
+    accel_bias: np.ndarray        # (N, 3)
+    fix_t: np.ndarray             # GNSS epochs seen
+    fix_status: np.ndarray        # 1 accepted, 0 rejected, -1 before initialisation
+    innovations: np.ndarray       # (M, 3) ENU, m (NaN before init)
+    nis: np.ndarray
+    mode: np.ndarray              # per fix: 0 normal, 1 suspect
+    smoothed: bool = False
+    stats: dict = field(default_factory=dict)
+
+
+
+def _still(imu_w, imu_f, C_nb, cfg):
+    """ZUPT detector on one aiding block: small rates, steady |f|, no horizontal acceleration.
+
+    An IMU cannot tell rest from constant velocity, so the caller also asks for a slow INS.
+    """
+    if len(imu_w) < 3:
+        return False
+    f_n = C_nb.T @ imu_f.mean(0)
+    return (np.max(np.linalg.norm(imu_w, axis=1)) < cfg.zupt_gyro
+            and np.std(np.linalg.norm(imu_f, axis=1)) < cfg.zupt_accel
+            and np.hypot(f_n[0], f_n[1]) < cfg.zupt_accel_h)
+
+
+def _consistent_run(p, t, sig, cfg):
+    """True if positions ``p`` (W, 2) at times ``t`` fit bounded speed and acceleration.
+
+    Second differences ``p_{k+1} − 2p_k + p_{k−1}`` must stay below ``a_max Δt² + 3·√6 σ``:
+    white outliers of 200 m break that at once (start-up, DESIGN §7).
+    """
+    dt = np.diff(t)
+    if np.any(dt > 5.0) or np.any(dt <= 0):
+        return False
+    v = np.diff(p, axis=0) / dt[:, None]
+    if np.any(np.linalg.norm(v, axis=1) > 70.0 + 3 * np.sqrt(2) * np.max(sig) / dt.min()):
+        return False
+    acc = np.linalg.norm(np.diff(v, axis=0), axis=1)
+    return bool(np.all(acc < cfg.max_accel * dt.max() + 3 * np.sqrt(6) * np.max(sig) / dt.min()))
+
+
+def _triad_nb(b1, b2, n1, n2):
+    """``C_n^b`` with ``C_n^b n1 ∥ b1`` exactly and ``n2`` as close to ``b2`` as it can be."""
+    def frame(u, w):
+        u = u / np.linalg.norm(u)
+        c = np.cross(u, w)
+        c = c / np.linalg.norm(c)
+        return np.column_stack([u, c, np.cross(u, c)])
+    return frame(b1, b2) @ frame(n1, n2).T
+
+
+def _still_before(imu, t_end, gnss=None, g=9.8, window=1.0, lookback=60.0):
+    """Start index of the last still second within ``lookback`` s before ``t_end``, or None.
+
+    Still: gyro norm below 1 °/s, |f| steady to 0.05 m/s² and within 0.1 m/s² of gravity (a
+    constant acceleration is steady too), and the GNSS fixes around it not moving.
+    """
+    n = int(round(window / imu.dt))
+    j1 = np.searchsorted(imu.t, t_end)
+    j0 = np.searchsorted(imu.t, t_end - lookback)
+    for j in range(j1 - n, j0 - 1, -max(n // 4, 1)):
+        if j < 0:
+            break
+        w = imu.omega_ib_b[j:j + n]
+        fn = np.linalg.norm(imu.f_ib_b[j:j + n], axis=1)
+        if not (np.max(np.linalg.norm(w, axis=1)) < np.radians(1.0) and np.std(fn) < 0.05
+                and abs(np.mean(fn) - g) < 0.1):
+            continue
+        if gnss is not None:
+            m = (gnss.t >= imu.t[j] - 1.0) & (gnss.t <= imu.t[min(j + n, len(imu.t) - 1)] + 1.0)
+            if m.sum() >= 2:
+                d = _enu_offset(gnss.lat[m][0], gnss.lon[m][0], 0.0, gnss.lat[m][-1],
+                                gnss.lon[m][-1], 0.0)
+                span = gnss.t[m][-1] - gnss.t[m][0]
+                sig = float(np.max(gnss.sigma_m[m])) if gnss.sigma_m is not None else 5.0
+                if np.hypot(d[0], d[1]) > 0.5 * span + 3.0 * np.sqrt(2) * sig:
+                    continue
+        return j
+    return None
+
+
+def init_from_gnss(imu, gnss: GnssData, cfg: FilterConfig, sig_h):
+    """Initial state for a vehicle: the in-motion alignment.
+
+    1. The first window of fixes that fit bounded speed and acceleration, moving fast enough
+       that the course is known (speed above ``min_init_speed`` and four times its σ):
+       position and velocity by a straight-line fit, heading from the course (a car moves
+       along its body y axis).
+    2. Roll and pitch: levelled from the last still second before it (if any), carried to
+       the start time by the gyros (the rotation about the vertical is irrelevant there);
+       otherwise from the specific force against the GNSS acceleration of a quadratic fit.
+    """
+    n = len(gnss.t)
+    W = max(cfg.window, 3)
+    lat0, lon0 = gnss.lat[0], gnss.lon[0]
+    rm, rn = radii(lat0, 0.0)
+    p = np.column_stack([(gnss.lon - lon0) * rn * np.cos(lat0), (gnss.lat - lat0) * rm, gnss.h])
+    for k in range(n - W + 1):
+        sl = slice(k, k + W)
+        if cfg.robust and not _consistent_run(p[sl, :2], gnss.t[sl], sig_h[sl], cfg):
+            continue
+        # a straight-line fit gives the *mean* velocity: exact at the centre of the window for a
+        # constant acceleration, so the filter starts at the centre time
+        t0 = float(np.mean(gnss.t[sl]))
+        tt = gnss.t[sl] - t0
+        A = np.column_stack([np.ones(W), tt])
+        coef, *_ = np.linalg.lstsq(A, p[sl], rcond=None)
+        s = float(np.max(sig_h[sl]))
+        cov = np.linalg.inv(A.T @ A) * s * s
+        v0, sv = coef[1], float(np.sqrt(cov[1, 1]))
+        if gnss.velocity_n is not None:
+            v0 = np.array([np.interp(t0, gnss.t[sl], gnss.velocity_n[sl, i]) for i in range(3)])
+            sv = cfg.gnss_vel_sigma
+        speed = float(np.hypot(v0[0], v0[1]))
+        if speed <= max(cfg.min_init_speed, 4.0 * sv):
+            continue
+        sp = float(np.sqrt(cov[0, 0]))
+        lat = lat0 + coef[0, 1] / rm
+        lon = lon0 + coef[0, 0] / (rn * np.cos(lat0))
+        hdg = np.arctan2(v0[0], v0[1])
+        j0 = _still_before(imu, t0, gnss, float(normal_gravity(lat, coef[0, 2])))
+        if j0 is not None:
+            nlev = int(round(1.0 / imu.dt))
+            f_lev = imu.f_ib_b[j0:j0 + nlev].mean(0)
+            roll0 = np.arctan2(-f_lev[0], f_lev[2])
+            pitch0 = np.arctan2(f_lev[1], np.hypot(f_lev[0], f_lev[2]))
+            C0 = att.dcm_nb_from_euler(roll0, pitch0, 0.0)
+            j1 = np.searchsorted(imu.t, t0)
+            from selfnav.latitude import _gyro_attitude
+            dts = np.diff(imu.t[j0:j1 + 1], prepend=imu.t[j0] - imu.dt)
+            q = _gyro_attitude(np.ascontiguousarray(imu.omega_ib_b[j0:j1 + 1]), dts)
+            C_bn = C0.T @ att.quat_to_dcm(q[-1])
+            roll, pitch, _ = att.euler_from_dcm_bn(C_bn)
+            dur = imu.t[j1] - imu.t[j0]
+            s_tilt = np.radians(0.3) + cfg.gyro_bias_sigma * dur
+        else:
+            # quadratic fit over twice the window for the acceleration
+            sl2 = slice(max(0, k + W - 2 * W), k + W)
+            t2 = gnss.t[sl2] - t0
+            A2 = np.column_stack([np.ones(len(t2)), t2, 0.5 * t2 * t2])
+            c2, *_ = np.linalg.lstsq(A2, p[sl2], rcond=None)
+            sa = float(np.sqrt(np.linalg.inv(A2.T @ A2)[2, 2])) * s
+            j = np.searchsorted(imu.t, t0)
+            f_b = imu.f_ib_b[max(0, j - int(round(0.5 / imu.dt))):j + 1].mean(0)
+            f_n = c2[2] + np.array([0.0, 0.0, float(normal_gravity(lat, coef[0, 2]))])
+            Ct = _triad_nb(f_b, np.array([0.0, 1.0, 0.0]), f_n, v0 / np.linalg.norm(v0))
+            roll, pitch, _ = att.euler_from_dcm_nb(Ct)
+            s_tilt = np.hypot(sa, 0.3) / 9.8 + np.radians(1.0)
+        s_hdg = np.arctan2(sv, speed) + np.radians(2.0)
+        return dict(t=t0, lat=lat, lon=lon, h=coef[0, 2], velocity_n=v0,
+                    C_nb=att.dcm_nb_from_euler(roll, pitch, hdg),
+                    sigmas=([2 * sp, 2 * sp, 3 * sp], [2 * sv, 2 * sv, 2 * sv + 0.2],
+                            [2 * s_tilt, 2 * s_tilt, 2 * s_hdg]))
+    raise SelfnavError(f"no run of {W} mutually consistent GNSS fixes moving faster than "
+                       f"{cfg.min_init_speed} m/s to start from (heading needs motion)")
+
+
+
+class _FixStore:
+    """The fixes seen so far (lists indexed like the input)."""
+
+    def __init__(self):
+        self.t, self.lat, self.lon, self.h, self.vel = [], [], [], [], []
+
+
+class StreamingNavigator:
+    """Streaming INS/GNSS filter (see the module docstring).
+
+    Parameters
+    ----------
+    cfg : FilterConfig
+    init : dict
+        ``t, lat, lon, h, velocity_n, C_nb`` and optionally ``sigmas`` (position, velocity,
+        attitude σ triples) or ``P``.
+    road_aid : callable, optional
+        ``road_aid(t, flt) -> None | dict`` (see :func:`run_filter`).
+    record : bool
+        Keep every epoch for :meth:`result` (and the smoother).
+
+    Notes
+    -----
+    Fixes must be added before the IMU stream passes their time stamp (a late fix is applied
+    at the next epoch, which batch processing would not do).
+    """
+
+    def __init__(self, cfg: FilterConfig, init: dict, *, road_aid=None, record: bool = True):
+        self.cfg = cfg
+        t0 = float(init["t"])
+        flt = InsGnssFilter(cfg, t0, init["lat"], init["lon"], init["h"], init["velocity_n"],
+                            init["C_nb"])
+        if "P" in init:
+            flt.P = np.array(init["P"], dtype=float)
+        elif "sigmas" in init:
+            sp, sv, sa = init["sigmas"]
+            flt.P[IR, IR] = np.diag(np.square(sp))
+            flt.P[IV, IV] = np.diag(np.square(sv))
+            flt.P[IP, IP] = np.diag(np.square(sa))
+        self.flt = flt
+        self.t0 = t0
+        self.road_aid = road_aid
+        self.record = record
+        self._n_aid = 1
+        self._events = []          # heap of (t, kind, seq, k)
+        self._seq = 0
+        self._buf_t, self._buf_w, self._buf_f, self._buf_dt = [], [], [], []
+        self._t_last = None
+        self.fixes = _FixStore()
+        self.sig_h, self.sig_v = [], []
+        self.status, self.innov, self.nis, self.mode = [], [], [], []
+        self.headings = []
+        self.rec = {k: [] for k in ("t", "state", "P", "Pm", "Phi", "dx")}
+        self.suspect = False
+        self.rejections = self.streak = self.degraded = self.reacq = 0
+        self.sus, self.win = [], []
+        self.disp = np.zeros(3)  # INS displacement by propagation only, ENU m
+
+    # ------------------------------------------------------------------ input
+    def add_gnss(self, t, lat, lon, h, sigma_h=np.nan, velocity_n=None):
+        """A fix (rad, rad, m; σ horizontal per axis, m). Returns its index."""
+        cfg = self.cfg
+        s = sigma_h if np.isfinite(sigma_h) else 5.0
+        if cfg.gnss_sigma_h is not None:
+            s = cfg.gnss_sigma_h
+        s = max(s, cfg.gnss_sigma_floor)
+        k = len(self.fixes.t)
+        f = self.fixes
+        f.t.append(float(t))
+        f.lat.append(float(lat))
+        f.lon.append(float(lon))
+        f.h.append(float(h))
+        f.vel.append(None if velocity_n is None else np.asarray(velocity_n, dtype=float))
+        self.sig_h.append(s)
+        self.sig_v.append(cfg.gnss_sigma_v if cfg.gnss_sigma_v is not None else 1.5 * s)
+        self.status.append(-1)
+        self.innov.append(np.full(3, np.nan))
+        self.nis.append(np.nan)
+        self.mode.append(0)
+        if t > self.t0:
+            self._push(t, 0, k)
+        return k
+
+    def add_heading(self, t, heading, sigma):
+        """A true-heading measurement (rad), e.g. magnetic heading plus declination."""
+        self.headings.append((float(heading), float(sigma)))
+        if t > self.t0:
+            self._push(t, 2, len(self.headings) - 1)
+
+    def _push(self, t, kind, k):
+        heapq.heappush(self._events, (float(t), kind, self._seq, k))
+        self._seq += 1
+
+    def add_imu(self, t, omega_ib_b, f_ib_b):
+        """IMU samples (scalar time or arrays): rates and specific force, mean over the
+        interval ending at ``t``. Processes every epoch the stream has now passed."""
+        t = np.atleast_1d(np.asarray(t, dtype=float))
+        w = np.atleast_2d(np.asarray(omega_ib_b, dtype=float))
+        f = np.atleast_2d(np.asarray(f_ib_b, dtype=float))
+        prev = self._t_last
+        dt = np.diff(np.concatenate([[t[0] - (t[1] - t[0] if len(t) > 1 else 0.01)
+                                      if prev is None else prev], t]))
+        if np.any(dt <= 0):
+            raise SelfnavError("IMU samples must have increasing times")
+        keep = t > self.t0
+        t, w, f, dt = t[keep], w[keep], f[keep], dt[keep]
+        if not len(t):
+            self._t_last = None if prev is None else prev
+            return
+        i = 0
+        while True:
+            te = self._next_event_time()
+            if te >= t[-1]:
+                break
+            j = int(np.searchsorted(t, te, side="right"))
+            self._append(t[i:j], w[i:j], f[i:j], dt[i:j])
+            i = j
+            self._process_next()
+        self._append(t[i:], w[i:], f[i:], dt[i:])
+        self._t_last = float(t[-1])
+
+    def _append(self, t, w, f, dt):
+        if len(t):
+            self._buf_t.append(t)
+            self._buf_w.append(w)
+            self._buf_f.append(f)
+            self._buf_dt.append(dt)
+
+    def _next_event_time(self):
+        ta = self.t0 + self.cfg.aid_step * self._n_aid
+        return min(ta, self._events[0][0]) if self._events else ta
+
+    def finish(self):
+        """Process the epochs up to the last IMU sample and propagate to it."""
+        if self._t_last is None:
+            return
+        while True:
+            te = self._next_event_time()
+            if te > self._t_last + 1e-9:
+                break
+            self._process_next()
+        if self._buf_t:
+            self._predict()
+            self._store(self._t_last, self.flt.P.copy(), np.zeros(self.flt.nx))
+
+    # ------------------------------------------------------------------ epochs
+    def _predict(self):
+        flt = self.flt
+        t = np.concatenate(self._buf_t)
+        w = np.concatenate(self._buf_w)
+        f = np.concatenate(self._buf_f)
+        dt = np.concatenate(self._buf_dt)
+        self._buf_t, self._buf_w, self._buf_f, self._buf_dt = [], [], [], []
+        p0 = (flt.ins.lat, flt.ins.lon, flt.ins.h)
+        flt.predict(t, w * dt[:, None], f * dt[:, None])
+        self.disp += _enu_offset(*p0, flt.ins.lat, flt.ins.lon, flt.ins.h)
+        return w, f
+
+    def _store(self, te, Pm, dx):
+        if not self.record:
+            self.flt.take_transition()
+            return
+        r = self.rec
+        r["t"].append(te)
+        r["state"].append(_pack(self.flt))
+        r["P"].append(self.flt.P.copy())
+        r["Pm"].append(Pm)
+        r["Phi"].append(self.flt.take_transition())
+        r["dx"].append(dx)
+
+    def _process_next(self):
+        ta = self.t0 + self.cfg.aid_step * self._n_aid
+        if self._events and (self._events[0][0], self._events[0][1]) < (ta, 1):
+            te, kind, _, k = heapq.heappop(self._events)
+        else:
+            te, kind, k = ta, 1, -1
+            self._n_aid += 1
+        flt, cfg = self.flt, self.cfg
+        if self._buf_t:
+            w_blk, f_blk = self._predict()
+        else:
+            w_blk = f_blk = np.zeros((0, 3))
+        Pm = flt.P.copy()
+        dx = np.zeros(flt.nx)
+        if kind == 1:
+            # still IMU *and* a slow INS: constant velocity also looks still to an IMU
+            if (cfg.zupt and np.linalg.norm(flt.ins.velocity_n) < cfg.zupt_speed
+                    and _still(w_blk - flt.bg, f_blk - flt.ba, flt.ins.C_nb, cfg)):
+                dx = flt.update_zupt()
+            elif cfg.nhc:
+                dx = flt.update_nhc()
+            if self.road_aid is not None:
+                meas = self.road_aid(te, flt)
+                if meas is not None:
+                    dx = dx + flt.update_road(**meas)
+        elif kind == 2:
+            dx = flt.update_heading(*self.headings[k])
+        else:
+            dx = self._fix(k)
+        self._store(te, Pm, dx)
+
+    def _fix(self, k):
+        flt, cfg, fx = self.flt, self.cfg, self.fixes
+        sh, sv_ = self.sig_h, self.sig_v
+        r, H = flt.position_residual(fx.lat[k], fx.lon[k], fx.h[k])
+        self.innov[k] = -r
+        R = np.diag([sh[k] ** 2, sh[k] ** 2, sv_[k] ** 2])
+        nis = float(r @ np.linalg.solve(H @ flt.P @ H.T + R, r))
+        self.nis[k] = nis
+        dx = np.zeros(flt.nx)
+        # soft gate: a fix a little beyond the χ² gate is used with R inflated by NIS/gate
+        # (Huber-like): real model errors are not Gaussian, outliers of 200 m are far beyond
+        ok = nis <= cfg.gate * (cfg.soft_gate if cfg.robust else 1.0)
+        if cfg.robust:
+            # window test: displacements between fixes against the INS displacement, which stays
+            # accurate when the absolute INS position has drifted (P cannot weaken it)
+            self.win = (self.win + [(k, self.disp.copy())])[-cfg.window:]
+            s_vel = float(np.sqrt(np.trace(flt.P[IV, IV]) / 3.0)) + 0.2
+            if self.suspect:
+                self.sus = [x for x in self.sus + [(fx.t[k], -r)]
+                            if x[0] > fx.t[k] - cfg.degraded_window]
+                win_ok = (len(self.win) >= cfg.window
+                          and _window_consistent(self.win, fx, sh, sv_, s_vel))
+                self.streak = self.streak + 1 if win_ok else 0
+                if win_ok and not ok and self.streak >= cfg.window:
+                    # a long run of self-consistent fixes that the dead reckoning cannot
+                    # explain: its drift exceeded P; re-acquire by widening P to the offset
+                    flt.P[IR, IR] += np.diag(r * r)
+                    ok = True
+                    self.reacq += 1
+                elif not win_ok:
+                    ok = False
+                    # degraded mode: white outliers still carry information. Their scale from
+                    # fix-to-fix differences (which cancel the slow dead-reckoning drift) against
+                    # their scale about the median: equal for white noise, much smaller for a
+                    # drifting (correlated) error, which is not used.
+                    s_eff = _white_scale(self.sus, cfg)
+                    if s_eff is not None and s_eff > 3.0 * sh[k]:
+                        R_d = np.diag([s_eff**2, s_eff**2, (1.5 * s_eff) ** 2])
+                        if float(r @ np.linalg.solve(H @ flt.P @ H.T + R_d, r)) <= cfg.gate:
+                            dx = flt._kalman(r, H, R_d)
+                            self.degraded += 1
+            elif len(self.win) > 1:
+                ok = ok and _disp_ok(self.win[-2], self.win[-1], fx, sh, sv_, s_vel)
+        self.mode[k] = int(self.suspect)
+        if ok:
+            dx = flt._kalman(r, H, R * max(1.0, nis / cfg.gate))
+            self.status[k] = 1
+            self.rejections = self.streak = 0
+            self.suspect = False
+            self.sus = []
+        else:
+            self.status[k] = 0
+            self.rejections += 1
+            if cfg.robust and self.rejections >= cfg.suspect_after:
+                self.suspect = True
+        if ok and cfg.use_gnss_velocity and fx.vel[k] is not None:
+            dx = dx + flt.update_velocity(fx.vel[k], cfg.gnss_vel_sigma)
+        return dx
+
+    # ------------------------------------------------------------------ output
+    def result(self, smooth: bool = False) -> "FilterResult":
+        """The recorded epochs as a :class:`FilterResult` (RTS-smoothed on request)."""
+        r = self.rec
+        t = np.asarray(r["t"])
+        states = np.asarray(r["state"])
+        Ps = np.asarray(r["P"])
+        smoothed = False
+        if smooth and len(t) > 2:
+            states, Ps = _rts(states, Ps, np.asarray(r["Pm"]), np.asarray(r["Phi"]),
+                              np.asarray(r["dx"]))
+            smoothed = True
+        traj, sig, bg, ba = _unpack(t, states, Ps)
+        st = np.asarray(self.status, int)
+        stats = {"fixes": len(st), "accepted": int(np.sum(st == 1)),
+                 "rejected": int(np.sum(st == 0)), "before_init": int(np.sum(st == -1)),
+                 "reacquisitions": self.reacq, "degraded_updates": self.degraded}
+        return FilterResult(traj, sig[:, IR], sig[:, IV], sig[:, IP], bg, ba,
+                            np.asarray(self.fixes.t), st, np.asarray(self.innov).reshape(-1, 3),
+                            np.asarray(self.nis), np.asarray(self.mode, int), smoothed, stats)
+
+
+def run_filter(imu, gnss: GnssData, cfg: FilterConfig | None = None, *, init=None,
+               smooth: bool = False, heading=None, road_aid=None, progress=None) -> "FilterResult":
+    """Run the loosely coupled filter over a whole record (batch call).
+
+    Parameters
+    ----------
+    imu : ImuData
+        Rates (mean over each interval ending at ``t``) in body RFU.
+    gnss : GnssData
+    cfg : FilterConfig
+    init : dict, optional
+        ``lat, lon, h, velocity_n, C_nb, t`` to start from (e.g. truth or a static alignment);
+        default: the in-motion alignment from the first trusted fixes (:func:`init_from_gnss`).
+    smooth : bool
+        Run the RTS smoother backwards over the stored epochs.
+    heading : (t, heading_rad, sigma_rad), optional
+        Heading measurements (magnetometer + declination).
+    road_aid : callable, optional
+        Called at every aiding epoch as ``road_aid(t, flt)`` with the
+        :class:`~selfnav.ekf.InsGnssFilter`; returns ``None`` or a dict of
+        :meth:`~selfnav.ekf.InsGnssFilter.update_road` arguments (a map matcher that knows
+        which road the vehicle is on).
+    progress : callable(fraction), optional
+    """
+    cfg = cfg or FilterConfig()
+    n = len(gnss.t)
+    sig_file = gnss.sigma_m if gnss.sigma_m is not None else np.full(n, np.nan)
+    if init is None:
+        s = np.where(np.isfinite(sig_file), sig_file, 5.0)
+        if cfg.gnss_sigma_h is not None:
+            s = np.full(n, cfg.gnss_sigma_h)
+        init = init_from_gnss(imu, gnss, cfg, np.maximum(s, cfg.gnss_sigma_floor))
+    nav = StreamingNavigator(cfg, init, road_aid=road_aid)
+    for k in range(n):
+        nav.add_gnss(gnss.t[k], gnss.lat[k], gnss.lon[k], gnss.h[k], sig_file[k],
+                     None if gnss.velocity_n is None else gnss.velocity_n[k])
+    if heading is not None:
+        for k in range(len(heading[0])):
+            nav.add_heading(heading[0][k], heading[1][k], heading[2][k])
+    chunks = np.array_split(np.arange(len(imu.t)), max(1, len(imu.t) // 20000))
+    for c, idx in enumerate(chunks):
+        nav.add_imu(imu.t[idx], imu.omega_ib_b[idx], imu.f_ib_b[idx])
+        if progress is not None:
+            progress((c + 1) / len(chunks))
+    nav.finish()
+    return nav.result(smooth)
+
+
+def _disp_ok(a, b, gnss, sig_h, sig_v, sv):
+    """Fix b agrees with fix a through the INS displacement (χ², 3 dof, 0.999).
+
+    ``sv`` is the INS velocity σ, m/s: the relative drift over the gap is ``sv·Δt``.
+    """
+    (ka, sa), (kb, sb) = a, b
+    dz = _enu_offset(gnss.lat[ka], gnss.lon[ka], gnss.h[ka], gnss.lat[kb], gnss.lon[kb], gnss.h[kb])
+    di = sb - sa  # INS displacement by propagation (see run_filter)
+    dtt = gnss.t[kb] - gnss.t[ka]
+    s2 = np.array([sig_h[ka] ** 2 + sig_h[kb] ** 2] * 2 + [sig_v[ka] ** 2 + sig_v[kb] ** 2]) + (sv * dtt) ** 2
+    d = dz - di
+    return float(np.sum(d * d / s2)) <= CHI2_3_999
+
+
+def _white_scale(sus, cfg):
+    """Robust per-axis scale of suspect innovations if they look white, else None.
+
+    Innovations (fix minus INS) over the last ``degraded_window`` seconds, each axis detrended
+    by a straight line (the dead-reckoning drift is slow). White errors: lag-1 autocorrelation
+    near zero and the scale from fix-to-fix differences (÷√2) equal to the scale about the
+    line. A drifting (Gauss–Markov) error is strongly autocorrelated: its fixes are not used.
+    """
+    if len(sus) < cfg.degraded_min:
+        return None
+    t = np.array([x[0] for x in sus])
+    v = np.array([x[1][:2] for x in sus])
+    A = np.column_stack([np.ones(len(t)), t - t.mean()])
+    res = v - A @ np.linalg.lstsq(A, v, rcond=None)[0]
+    rho = np.sum(res[1:] * res[:-1], axis=0) / np.maximum(np.sum(res * res, axis=0), 1e-300)
+    s_diff = 1.4826 * np.median(np.abs(np.diff(res, axis=0))) / np.sqrt(2.0)
+    s_level = 1.4826 * np.median(np.abs(res - np.median(res, axis=0)))
+    if s_level <= 0 or np.max(rho) > 0.3 or s_diff < 0.8 * s_level:
+        return None
+    return float(max(s_diff, s_level))
+
+
+def _window_consistent(buf, gnss, sig_h, sig_v, sv):
+    """All consecutive pairs in the window agree through the INS displacement."""
+    return all(_disp_ok(buf[i], buf[i + 1], gnss, sig_h, sig_v, sv) for i in range(len(buf) - 1))
+
+
