@@ -1,5 +1,5 @@
 """GNSS fixes: the native CSV (DESIGN §6: ``t, lat_deg, lon_deg, h_m[, sigma_m]``), RTKLIB ``.pos``
-and NMEA GGA/RMC readers. Positions are converted to WGS-84 at load time (``datum``)."""
+and NMEA GGA (+ RMC velocity) readers. Positions are converted to WGS-84 at load time (``datum``)."""
 from __future__ import annotations
 
 import calendar
@@ -180,6 +180,27 @@ def read_nmea(path) -> GnssData:
                     np.asarray(q), str(path))
 
 
+def _with_rmc_velocity(g: GnssData, path) -> GnssData:
+    """Add the horizontal velocity of RMC sentences (same time stamps) to GGA fixes."""
+    from selfnav.io.nmea_rmc import read_nmea_rmc
+
+    try:
+        rmc = read_nmea_rmc(path)
+    except InputError:
+        return g
+    if len(rmc.t) == 0:
+        return g
+    idx = np.searchsorted(rmc.t, g.t)
+    idx = np.clip(idx, 0, len(rmc.t) - 1)
+    same = np.abs(rmc.t[idx] - g.t) < 1e-3
+    if not np.all(same):
+        return g
+    v = rmc.velocity_n[idx].copy()
+    v[:, 2] = np.where(np.isfinite(v[:, 2]), v[:, 2], 0.0)
+    g.velocity_n = v
+    return g
+
+
 def read_gnss(path, fmt: str = "auto", datum: str = "wgs84") -> GnssData:
     """Read GNSS fixes: ``csv`` (native), ``pos`` (RTKLIB), ``nmea``; ``auto`` by extension."""
     p = Path(path)
@@ -192,6 +213,7 @@ def read_gnss(path, fmt: str = "auto", datum: str = "wgs84") -> GnssData:
         g = read_rtklib_pos(p)
     elif fmt == "nmea":
         g = read_nmea(p)
+        g = _with_rmc_velocity(g, p)
     else:
         raise InputError(p, f"unknown GNSS format '{fmt}' (use csv, pos or nmea)")
     if datum.lower() != "wgs84":

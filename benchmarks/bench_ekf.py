@@ -1,0 +1,47 @@
+"""Benchmark (run by hand): the INS/GNSS filter on 1 h of 200 Hz IMU with 1 Hz GNSS.
+
+Target (issue 4): under 10 s on one core (the mechanization alone: bench_strapdown.py).
+
+    python benchmarks/bench_ekf.py [--minutes 60]
+"""
+import argparse
+import time
+
+import numpy as np
+
+from selfnav import ekf
+from selfnav.io.gnss import GnssData
+from selfnav.io.imu import ImuData
+from selfnav.roads import packaged_map, read_roads
+from selfnav.sensors import GnssModel, imu_grade
+from selfnav.simulate.car import car_trajectory
+from selfnav.simulate.inverse import imu_from_trajectory
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--minutes", type=float, default=60.0)
+    a = ap.parse_args()
+    g = read_roads(packaged_map("kotka_karhula"))
+    t0 = time.perf_counter()
+    tr = car_trajectory(g, duration=a.minutes * 60, dt=0.1, seed=1)
+    imu, truth = imu_from_trajectory(tr, 0.005, return_truth=True)
+    rng = np.random.default_rng(1)
+    w, f = imu_grade("industrial").apply(imu.t, imu.omega_ib_b, imu.f_ib_b, rng)
+    fx = GnssModel(rate_hz=1, sigma_h=3, sigma_v=5).simulate(truth, rng)
+    print(f"simulated {len(imu)} IMU samples (200 Hz), {len(fx.t)} fixes in "
+          f"{time.perf_counter() - t0:.1f} s (simulated data)")
+    data = ImuData(imu.t, w, f)
+    gd = GnssData(fx.t, fx.lat, fx.lon, fx.h, fx.sigma_m)
+    for smooth in (False, True):
+        cfg = ekf.FilterConfig.for_grade("industrial")
+        t0 = time.perf_counter()
+        res = ekf.run_filter(data, gd, cfg, smooth=smooth)
+        el = time.perf_counter() - t0
+        span = imu.t[-1] - imu.t[0]
+        print(f"filter{' + RTS smoother' if smooth else ''}: {el:.2f} s for {span / 60:.0f} min "
+              f"({span / el:.0f}× real time), {len(res.trajectory.t)} epochs, {res.stats}")
+
+
+if __name__ == "__main__":
+    main()
