@@ -85,6 +85,38 @@ def cramer_rao_bound(arw, vrw, duration, g: float = G_STD, omega: float = OMEGA_
     return np.sqrt((np.asarray(arw) / omega) ** 2 + (np.asarray(vrw) / g) ** 2) / np.sqrt(duration)
 
 
+def time_to_accuracy(arw, vrw, sigma, g: float = G_STD, omega: float = OMEGA_EARTH):
+    """Averaging time (s) for the Cramér–Rao bound to reach ``sigma`` (rad): the inverse of
+    :func:`cramer_rao_bound`."""
+    return ((np.asarray(arw) / omega) ** 2 + (np.asarray(vrw) / g) ** 2) / np.asarray(sigma) ** 2
+
+
+def grade_table(lat=np.radians(45.0), duration=600.0):
+    """Error budget of the single-position method per sensor grade (``selfnav.sensors``).
+
+    For each grade: the noise bound after ``duration``, the bias-limited error (a horizontal
+    gyro bias across the meridian does not matter; a vertical one gives ``b/(Ω cos φ)``, a
+    north accelerometer bias ``b/g``, seed 000 (4.4)), and the time for the noise alone to reach
+    0.01°. Angles in degrees, times in seconds.
+    """
+    from selfnav.sensors import GRADES
+
+    rows = []
+    for name, m in GRADES.items():
+        arw = float(np.max(np.atleast_1d(m.gyro.white)))
+        vrw = float(np.max(np.atleast_1d(m.accel.white)))
+        bg = float(np.max(np.atleast_1d(m.gyro.bias)))
+        ba = float(np.max(np.atleast_1d(m.accel.bias)))
+        rows.append({
+            "grade": m.name,
+            "noise_deg": float(np.degrees(cramer_rao_bound(arw, vrw, duration))),
+            "gyro_bias_limited_deg": float(np.degrees(bg / (OMEGA_EARTH * np.cos(lat)))),
+            "accel_bias_limited_deg": float(np.degrees(ba / G_STD)),
+            "time_to_0.01deg_s": float(time_to_accuracy(arw, vrw, np.radians(0.01))),
+        })
+    return rows
+
+
 def latitude_gradient(omega_b, f_b):
     """Gradient of :func:`latitude_angle` with respect to ``(ω, f)``, shape ``(6,)``.
 
@@ -663,6 +695,6 @@ def estimate_latitude_multiposition(imu, *, gyro_bias_prior: float = 1.0 * DEG_P
 
 __all__ = [
     "latitude_seed", "latitude_angle", "cramer_rao_bound", "latitude_gradient", "latitude_error",
-    "requirements", "requirements_table", "estimate_latitude", "estimate_latitude_multiposition", "error_budget",
+    "requirements", "requirements_table", "time_to_accuracy", "grade_table", "estimate_latitude", "estimate_latitude_multiposition", "error_budget",
     "LatitudeResult", "SEED_TABLE_DPHI_DEG", "asdict",
 ]
