@@ -445,5 +445,9 @@ def _rts(states, P_plus, P_minus, Phi, updates):
     return out, Ps
 
 
+__all__ = ["FilterConfig", "InsGnssFilter", "GnssData", "FilterResult", "StreamingNavigator",
+           "init_from_gnss", "run_filter"]
+
 # The batch and streaming drivers live in selfnav.insgnss (imported last: it builds on this).
-from selfnav.insgnss import FilterResult, StreamingNavigator, init_from_gnss, run_filter  # noqa: E402,F401
+from selfnav.insgnss import (FilterResult, StreamingNavigator, init_from_gnss,  # noqa: E402,F401
+                             run_filter)

@@ -669,7 +669,6 @@ def estimate_latitude_multiposition(imu, *, gyro_bias_prior: float = 1.0 * DEG_P
     sol = least_squares(residuals, x0, method="lm", x_scale="jac", xtol=1e-14, ftol=1e-14)
     J = sol.jac
     cov = np.linalg.pinv(J.T @ J)
-    dof = max(len(sol.fun) - len(x0), 1)
     chi2 = float(np.sum(sol.fun[:6 * P] ** 2))
     scale = max(1.0, chi2 / max(6 * P - (len(x0) - 9), 1)) if 6 * P > len(x0) - 9 else 1.0
     lat, g, bg, ba, dth = unpack(sol.x)

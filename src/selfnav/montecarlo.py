@@ -29,7 +29,6 @@ from __future__ import annotations
 
 import logging
 import os
-import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
@@ -369,7 +368,7 @@ def write_results(path, result: MonteCarloResult) -> Path:
 
     Both carry the label *simulated* with the scenario, parameters and master seed.
     """
-    from selfnav.io.csvio import write_csv
+    from selfnav.io.csvio import atomic_path, write_csv
 
     path = Path(path)
     note = (f"simulated: selfnav montecarlo {result.pair}, {len(result.table['run'])} runs, "
@@ -386,15 +385,7 @@ def write_results(path, result: MonteCarloResult) -> Path:
         tab = pa.table({k: pa.array(v) for k, v in result.table.items()})
         tab = tab.replace_schema_metadata({b"selfnav": note.encode(),
                                            b"params": params.encode()})
-        path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-        os.close(fd)
-        try:
+        with atomic_path(path) as tmp:
             pq.write_table(tab, tmp)
-            os.replace(tmp, path)
-        except BaseException:
-            if os.path.exists(tmp):
-                os.unlink(tmp)
-            raise
         return path
     raise SelfnavError(f"{path}: output must end in .csv or .parquet")

@@ -66,6 +66,29 @@ def write_solution(path: Path, res, *, datum: str = "wgs84", comments=()):
     return write_csv(path, cols, comments=list(comments), fmt=fmt)
 
 
+def _run_seed(data, g, graph, mag_path, matcher, ins_datum, declination_deg, progress):
+    """``--method seed``: :func:`selfnav.seedloop.run_seed`, packed like an EKF result."""
+    from types import SimpleNamespace
+
+    from selfnav.seedloop import SeedConfig, run_seed
+
+    if mag_path is not None:
+        from selfnav.io import read_table
+
+        tab = read_table(mag_path, ("t", "mx", "my", "mz"))
+        m = np.column_stack([np.interp(data.t, tab["t"], tab[c]) for c in ("mx", "my", "mz")])
+        data.mag_b = m
+    cfg = SeedConfig(matcher=matcher, ins_datum=ins_datum,
+                     declination=None if declination_deg is None else np.radians(declination_deg))
+    r = run_seed(data, g, graph, cfg, progress=progress)
+    n = len(r.trajectory.t)
+    # the seed loop has no covariance: σ columns are NaN
+    stats = dict(r.stats)
+    stats.pop("t_start", None)
+    return SimpleNamespace(trajectory=r.trajectory, sigma_enu=np.full((n, 3), np.nan),
+                           mode=np.zeros(n, int), stats=stats)
+
+
 def register(app: typer.Typer) -> None:
     @app.command("navigate")
     def navigate_cmd(
@@ -86,6 +109,13 @@ def register(app: typer.Typer) -> None:
         no_window_test: bool = typer.Option(False, help="Only the χ² gate (for comparison)."),
         no_nhc: bool = typer.Option(False, help="No non-holonomic constraint (not a car)."),
         scale_factors: bool = typer.Option(False, help="Estimate scale factors (21 states)."),
+        matcher: str = typer.Option("seed", help="--method seed identification: seed "
+                                    "(residual minimisation, seed 004 §3) or mht (road particles)."),
+        ins_datum: str = typer.Option("sk42", help="--method seed: datum of the fast loop."),
+        declination_deg: Optional[float] = typer.Option(
+            None, help="Magnetic declination, deg (default: field model at the start)."),
+        mag: Optional[Path] = typer.Option(None, "--mag", help="Magnetometer CSV t,mx,my,mz "
+                                           "(default: mx,my,mz columns of the IMU CSV)."),
         as_json: bool = typer.Option(False, "--json", help="Print one JSON object."),
     ):
         """Navigate with an IMU and GNSS; survives unflagged GNSS outliers (window test)."""
@@ -94,9 +124,13 @@ def register(app: typer.Typer) -> None:
 
         if method not in ("ekf", "seed"):
             raise SelfnavError(f"unknown method '{method}' (use ekf or seed)")
-        if method == "seed" or map_ is not None:
-            raise SelfnavError("the seed 004 road navigator and map aiding are not built yet "
-                               "(issue 5); use --method ekf without --map")
+        graph = None
+        if method == "seed" and map_ is None:
+            raise SelfnavError("--method seed needs a road map: --map ROADS (.osm/.osm.pbf)")
+        if map_ is not None:
+            from selfnav.roads import read_roads
+
+            graph = read_roads(map_)
         fmt = imu_format
         if fmt == "auto":
             name = imu.name.lower()
@@ -121,20 +155,28 @@ def register(app: typer.Typer) -> None:
             bar = Progress(transient=True, console=None)
             bar.start()
             task = bar.add_task("navigating", total=1.0)
-
-            def progress(x):
-                bar.update(task, completed=x)
+            progress = lambda x: bar.update(task, completed=x)  # noqa: E731
         try:
-            res = ekf.run_filter(data, g, cfg, smooth=smooth, progress=progress)
+            if method == "seed":
+                res = _run_seed(data, g, graph, mag, matcher, ins_datum, declination_deg, progress)
+            else:
+                aid = None
+                if graph is not None:
+                    from selfnav.roadnav import EkfRoadAid
+
+                    aid = EkfRoadAid(graph, g)
+                res = ekf.run_filter(data, g, cfg, smooth=smooth, progress=progress, road_aid=aid)
         finally:
             if bar is not None:
                 bar.stop()
         elapsed = time.perf_counter() - t0
         write_solution(out, res, datum=out_datum, comments=[
-            f"selfnav navigate --method ekf{' --smooth' if smooth else ''}; imu {imu.name}; "
+            f"selfnav navigate --method {method}{' --smooth' if smooth else ''}"
+            f"{' --map ' + map_.name if map_ is not None else ''}; imu {imu.name}; "
             f"gnss {gnss.name}; datum {out_datum}"])
         span = float(data.t[-1] - data.t[0])
-        summary = {"method": "ekf", "smoothed": smooth, "epochs": len(res.trajectory.t),
+        summary = {"method": method, "map": None if map_ is None else str(map_),
+                   "smoothed": smooth and method == "ekf", "epochs": len(res.trajectory.t),
                    "imu_samples": len(data), "duration_s": span, "seconds": elapsed,
                    "real_time_factor": span / max(elapsed, 1e-9), **res.stats,
                    "suspect_fixes": int(np.sum(res.mode == 1)), "out": str(out)}
@@ -143,6 +185,10 @@ def register(app: typer.Typer) -> None:
             return
         print(f"{out}: {summary['epochs']} epochs over {span:.1f} s, {elapsed:.1f} s "
               f"({summary['real_time_factor']:.0f}× real time)")
+        if method == "seed":
+            print(f"  seed 004 slow loop ({matcher}): k_M {res.stats['k_m']}, "
+                  f"{res.stats['healthy_fixes']} fixes judged healthy")
+            return
         print(f"  GNSS fixes: {res.stats['accepted']} accepted, {res.stats['rejected']} rejected, "
               f"{res.stats['before_init']} before initialisation, "
               f"{res.stats['degraded_updates']} used with inflated σ while suspect")

@@ -6,6 +6,7 @@ half-written.
 """
 from __future__ import annotations
 
+import contextlib
 import difflib
 import gzip
 import io
@@ -172,6 +173,25 @@ def check_time(table, column="t", *, min_rows=1):
     return t
 
 
+@contextlib.contextmanager
+def atomic_path(path):
+    """Yield a temporary path beside ``path``; move it into place only if the block succeeds.
+
+    Nothing half-written is ever left at ``path`` (nor the temporary file, on failure).
+    """
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    os.close(fd)
+    try:
+        yield tmp
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+
+
 def write_csv(path, columns: dict, *, comments=(), fmt="%.10g"):
     """Write named columns to ``path`` atomically (temporary file moved into place).
 
@@ -192,34 +212,17 @@ def write_csv(path, columns: dict, *, comments=(), fmt="%.10g"):
     if len(n) > 1:
         raise ValueError(f"columns of different lengths: {dict(zip(names, map(len, arrs)))}")
     fmts = [fmt.get(k, "%.10g") if isinstance(fmt, dict) else fmt for k in names]
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w", newline="\n") as fh:
-            for c in comments:
-                fh.write(f"# {c}\n")
-            fh.write(",".join(names) + "\n")
-            if arrs and len(arrs[0]):
-                np.savetxt(fh, np.column_stack(arrs), delimiter=",", fmt=fmts)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    with atomic_path(path) as tmp, open(tmp, "w", newline="\n") as fh:
+        for c in comments:
+            fh.write(f"# {c}\n")
+        fh.write(",".join(names) + "\n")
+        if arrs and len(arrs[0]):
+            np.savetxt(fh, np.column_stack(arrs), delimiter=",", fmt=fmts)
     return path
 
 
 def atomic_write_bytes(path, data: bytes):
     """Write bytes to ``path`` through a temporary file moved into place."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-    return path
+    with atomic_path(path) as tmp, open(tmp, "wb") as fh:
+        fh.write(data)
+    return Path(path)

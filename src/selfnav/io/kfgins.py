@@ -29,14 +29,12 @@ the first row's week (``(week − week₀)·604800 + sow``).
 from __future__ import annotations
 
 import io
-import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
 from selfnav.errors import InputError
-from selfnav.io.csvio import _open_text
+from selfnav.io.csvio import _open_text, atomic_path
 from selfnav.io.gnss import GnssData
 from selfnav.io.imu import ImuData
 from selfnav.simulate.trajectory import Trajectory
@@ -221,18 +219,9 @@ def read_kfgins_nav(path) -> Trajectory:
 
 # ---------------------------------------------------------------------------------- writers
 def _write_rows(path, arr, fmts):
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w", newline="\n") as fh:
-            np.savetxt(fh, arr, fmt=fmts, delimiter=" ")
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-    return path
+    with atomic_path(path) as tmp, open(tmp, "w", newline="\n") as fh:
+        np.savetxt(fh, arr, fmt=fmts, delimiter=" ")
+    return Path(path)
 
 
 def write_kfgins_imu(path, imu: ImuData, *, dt0: float | None = None):
