@@ -9,7 +9,6 @@ import importlib
 import pkgutil
 import sys
 
-import click
 import typer
 
 from selfnav.errors import SelfnavError
@@ -22,6 +21,20 @@ app = typer.Typer(
     pretty_exceptions_enable=False,
     rich_markup_mode=None,
 )
+
+
+def _version(value: bool):
+    if value:
+        from selfnav import __version__
+
+        print(f"selfnav {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _root(version: bool = typer.Option(False, "--version", callback=_version, is_eager=True,
+                                       help="Print the version and exit.")):
+    """Navigation without (or despite) satellite signals."""
 
 
 def _register_all() -> None:
@@ -43,17 +56,22 @@ def main(argv=None) -> int:
     except SelfnavError as e:
         print(f"selfnav: error: {e}", file=sys.stderr)
         code = e.exit_code
-    except click.exceptions.Exit as e:
-        code = e.exit_code
-    except click.ClickException as e:
-        e.show()
-        code = e.exit_code
-    except click.exceptions.Abort:
-        print("selfnav: aborted", file=sys.stderr)
-        code = 130
     except KeyboardInterrupt:
         print("selfnav: interrupted", file=sys.stderr)
         code = 130
+    except Exception as e:
+        # typer's (vendored or not) click exceptions, recognised by what they offer
+        kind = type(e).__name__
+        if kind == "Exit":
+            code = e.exit_code
+        elif kind == "Abort":
+            print("selfnav: aborted", file=sys.stderr)
+            code = 130
+        elif hasattr(e, "show") and hasattr(e, "exit_code"):  # usage errors, bad parameters
+            e.show()
+            code = e.exit_code
+        else:
+            raise
     if argv is None:
         sys.exit(code)
     return code
