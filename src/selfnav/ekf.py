@@ -85,13 +85,14 @@ class FilterConfig:
     aid_step: float = 0.2                        # NHC / ZUPT update interval, s
     robust: bool = True                          # window consistency test and dead reckoning
     gate: float = CHI2_3_999                     # χ² gate on each fix (3 dof)
-    soft_gate: float = 10.0                      # with robust: up to soft_gate × gate, R inflated
+    soft_gate: float = 10.0                      # with robust: up to soft_gate × gate, R inflated,
+    soft_gate_max_m: float = 3.0                 # … for innovations below this or 3σ only
     degraded_window: float = 20.0                # s of suspect fixes to judge their noise
     degraded_min: int = 15                       # at least this many fixes
     window: int = 6                              # fixes in the consistency window
     suspect_after: int = 2                       # consecutive rejections before suspect mode
     max_accel: float = 5.0                       # start-up motion model, m/s²
-    min_init_speed: float = 2.0                  # heading from the GNSS course above this, m/s
+    min_init_speed: float = 5.0                  # heading from the GNSS course above this, m/s
     vertical: str = "free"
     scale_factors: bool = False                  # add gyro and accel scale-factor states (21)
     gyro_sf_sigma: float = 0.01
@@ -445,9 +446,13 @@ def _rts(states, P_plus, P_minus, Phi, updates):
     return out, Ps
 
 
-__all__ = ["FilterConfig", "InsGnssFilter", "GnssData", "FilterResult", "StreamingNavigator",
-           "init_from_gnss", "run_filter"]
+__all__ = ["FilterConfig", "InsGnssFilter", "GnssData"]
 
-# The batch and streaming drivers live in selfnav.insgnss (imported last: it builds on this).
-from selfnav.insgnss import (FilterResult, StreamingNavigator, init_from_gnss,  # noqa: E402,F401
-                             run_filter)
+# The batch and streaming drivers live in selfnav.insgnss (built on this module): resolved
+# lazily so that either module can be imported first.
+def __getattr__(name):
+    if name in ("FilterResult", "StreamingNavigator", "init_from_gnss", "run_filter"):
+        from selfnav import insgnss
+
+        return getattr(insgnss, name)
+    raise AttributeError(f"module 'selfnav.ekf' has no attribute '{name}'")

@@ -15,14 +15,16 @@ filter is *suspect*: it dead-reckons, uses white outliers with their own robust 
 """
 from __future__ import annotations
 
+import functools
 import heapq
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.stats import chi2
 
 from selfnav import attitude as att
-from selfnav.earth import normal_gravity, radii
-from selfnav.ekf import (CHI2_3_999, IP, IR, IV, FilterConfig, InsGnssFilter, _enu_offset, _pack,
+from selfnav.earth import OMEGA_EARTH, normal_gravity, radii
+from selfnav.ekf import (CHI2_3_999, IBG, IP, IR, IV, FilterConfig, InsGnssFilter, _enu_offset, _pack,
                          _rts, _unpack)
 from selfnav.errors import SelfnavError
 from selfnav.io.gnss import GnssData
@@ -87,11 +89,17 @@ def _triad_nb(b1, b2, n1, n2):
     return frame(b1, b2) @ frame(n1, n2).T
 
 
-def _still_before(imu, t_end, gnss=None, g=9.8, window=1.0, lookback=60.0):
-    """Start index of the last still second within ``lookback`` s before ``t_end``, or None.
+def _still_before(imu, t_end, gnss=None, g=9.8, window=1.0, lookback=30.0, accel_bias=0.0):
+    """Last still second within ``lookback`` s before ``t_end``: ``(index, a_bound)`` or None.
+
+    ``a_bound`` (m/s²) is the largest constant acceleration the tests below could have missed:
+    the levelling error it allows, ``atan(a_bound/g)``, goes into the tilt σ.
 
     Still: gyro norm below 1 °/s, |f| steady to 0.05 m/s² and within 0.1 m/s² of gravity (a
-    constant acceleration is steady too), and the GNSS fixes around it not moving.
+    constant acceleration is steady too), and the GNSS fixes around it not moving. The
+    accelerometers cannot tell a gentle constant acceleration (below ~1.4 m/s²) from rest, and
+    a 10 m receiver cannot either: the tilt σ of this path assumes a good receiver or a real
+    stop.
     """
     n = int(round(window / imu.dt))
     j1 = np.searchsorted(imu.t, t_end)
@@ -104,6 +112,8 @@ def _still_before(imu, t_end, gnss=None, g=9.8, window=1.0, lookback=60.0):
         if not (np.max(np.linalg.norm(w, axis=1)) < np.radians(1.0) and np.std(fn) < 0.05
                 and abs(np.mean(fn) - g) < 0.1):
             continue
+        # |f| = sqrt(g² + a²) ≈ g + a²/2g: an acceleration below this hides in the |f| test
+        a_bound = np.sqrt(2.0 * g * (0.1 + accel_bias))
         if gnss is not None:
             m = (gnss.t >= imu.t[j] - 1.0) & (gnss.t <= imu.t[min(j + n, len(imu.t) - 1)] + 1.0)
             if m.sum() >= 2:
@@ -111,25 +121,33 @@ def _still_before(imu, t_end, gnss=None, g=9.8, window=1.0, lookback=60.0):
                                 gnss.lon[m][-1], 0.0)
                 span = gnss.t[m][-1] - gnss.t[m][0]
                 sig = float(np.max(gnss.sigma_m[m])) if gnss.sigma_m is not None else 5.0
-                if np.hypot(d[0], d[1]) > 0.5 * span + 3.0 * np.sqrt(2) * sig:
+                tol = 0.2 * span + 3.0 * np.sqrt(2) * sig
+                if np.hypot(d[0], d[1]) > tol:
                     continue
-        return j
+                a_bound = min(a_bound, 2.0 * tol / span**2)
+        return j, float(a_bound)
     return None
 
 
 def init_from_gnss(imu, gnss: GnssData, cfg: FilterConfig, sig_h):
     """Initial state for a vehicle: the in-motion alignment.
 
-    1. The first window of fixes that fit bounded speed and acceleration, moving fast enough
-       that the course is known (speed above ``min_init_speed`` and four times its σ):
-       position and velocity by a straight-line fit, heading from the course (a car moves
+    1. The first window of fixes that fit bounded speed and acceleration *and* a straight line
+       at constant speed (χ² of the line fit), moving fast enough that the course is known
+       (speed above ``min_init_speed`` and four times its σ). The window is long enough for a
+       velocity σ of 0.5 m/s (a 10 m σ receiver at 1 Hz needs 17 fixes; at most 20).
+       Position and velocity from the fit at its centre, heading from the course (a car moves
        along its body y axis).
-    2. Roll and pitch: levelled from the last still second before it (if any), carried to
-       the start time by the gyros (the rotation about the vertical is irrelevant there);
-       otherwise from the specific force against the GNSS acceleration of a quadratic fit.
+    2. Roll and pitch: levelled in the last still second before (GNSS confirms it is still),
+       carried to the start by the gyros; the still period also gives the gyro biases (mean
+       rate less the vertical Earth rate; the horizontal Earth rate is left in their σ).
+       Without a still period: levelled from the mean specific force over the straight,
+       constant-speed window.
     """
     n = len(gnss.t)
-    W = max(cfg.window, 3)
+    dtf = float(np.median(np.diff(gnss.t))) if n > 1 else 1.0
+    s_med = float(np.median(sig_h))
+    W = int(np.clip(np.ceil((12.0 * s_med**2 / (0.25 * dtf**2)) ** (1.0 / 3.0)), max(cfg.window, 3), 20))
     lat0, lon0 = gnss.lat[0], gnss.lon[0]
     rm, rn = radii(lat0, 0.0)
     p = np.column_stack([(gnss.lon - lon0) * rn * np.cos(lat0), (gnss.lat - lat0) * rm, gnss.h])
@@ -144,54 +162,60 @@ def init_from_gnss(imu, gnss: GnssData, cfg: FilterConfig, sig_h):
         A = np.column_stack([np.ones(W), tt])
         coef, *_ = np.linalg.lstsq(A, p[sl], rcond=None)
         s = float(np.max(sig_h[sl]))
+        res = p[sl, :2] - A @ coef[:, :2]
+        if float(np.sum(res**2)) / s**2 > _chi2_999(2 * (W - 2)):
+            continue  # turning or accelerating: the course is not one number
         cov = np.linalg.inv(A.T @ A) * s * s
         v0, sv = coef[1], float(np.sqrt(cov[1, 1]))
         if gnss.velocity_n is not None:
             v0 = np.array([np.interp(t0, gnss.t[sl], gnss.velocity_n[sl, i]) for i in range(3)])
             sv = cfg.gnss_vel_sigma
         speed = float(np.hypot(v0[0], v0[1]))
-        if speed <= max(cfg.min_init_speed, 4.0 * sv):
+        if speed <= max(cfg.min_init_speed, 6.0 * sv):
             continue
         sp = float(np.sqrt(cov[0, 0]))
         lat = lat0 + coef[0, 1] / rm
         lon = lon0 + coef[0, 0] / (rn * np.cos(lat0))
         hdg = np.arctan2(v0[0], v0[1])
-        j0 = _still_before(imu, t0, gnss, float(normal_gravity(lat, coef[0, 2])))
-        if j0 is not None:
-            nlev = int(round(1.0 / imu.dt))
-            f_lev = imu.f_ib_b[j0:j0 + nlev].mean(0)
+        out = dict(t=t0, lat=lat, lon=lon, h=coef[0, 2], velocity_n=v0)
+        still = _still_before(imu, t0, gnss, float(normal_gravity(lat, coef[0, 2])),
+                              accel_bias=cfg.accel_bias_sigma)
+        if still is not None:
+            j0, a_bound = still
+            js, je = j0, j0 + int(round(1.0 / imu.dt))
+            f_lev = imu.f_ib_b[js:je].mean(0)
             roll0 = np.arctan2(-f_lev[0], f_lev[2])
             pitch0 = np.arctan2(f_lev[1], np.hypot(f_lev[0], f_lev[2]))
             C0 = att.dcm_nb_from_euler(roll0, pitch0, 0.0)
+            # gyro biases: the mean rate less the vertical Earth rate (heading unknown)
+            up_b = f_lev / np.linalg.norm(f_lev)
+            w_mean = imu.omega_ib_b[js:je].mean(0)
+            bg = w_mean - up_b * OMEGA_EARTH * np.sin(lat)
+            sbg = np.sqrt(np.var(imu.omega_ib_b[js:je], axis=0) / (je - js)
+                          + (OMEGA_EARTH * np.cos(lat)) ** 2 + cfg.gyro_bias_instability**2)
+            out["gyro_bias"], out["gyro_bias_sigma"] = bg, sbg
             j1 = np.searchsorted(imu.t, t0)
             from selfnav.latitude import _gyro_attitude
-            dts = np.diff(imu.t[j0:j1 + 1], prepend=imu.t[j0] - imu.dt)
-            q = _gyro_attitude(np.ascontiguousarray(imu.omega_ib_b[j0:j1 + 1]), dts)
+            dts = np.diff(imu.t[je - 1:j1 + 1], prepend=imu.t[je - 1] - imu.dt)
+            q = _gyro_attitude(np.ascontiguousarray(imu.omega_ib_b[je - 1:j1 + 1] - bg), dts)
             C_bn = C0.T @ att.quat_to_dcm(q[-1])
             roll, pitch, _ = att.euler_from_dcm_bn(C_bn)
-            dur = imu.t[j1] - imu.t[j0]
-            s_tilt = np.radians(0.3) + cfg.gyro_bias_sigma * dur
+            dur = imu.t[j1] - imu.t[je - 1]
+            s_tilt = np.radians(0.3) + np.arctan(a_bound / 9.8) + float(np.max(sbg)) * dur
         else:
-            # quadratic fit over twice the window for the acceleration
-            sl2 = slice(max(0, k + W - 2 * W), k + W)
-            t2 = gnss.t[sl2] - t0
-            A2 = np.column_stack([np.ones(len(t2)), t2, 0.5 * t2 * t2])
-            c2, *_ = np.linalg.lstsq(A2, p[sl2], rcond=None)
-            sa = float(np.sqrt(np.linalg.inv(A2.T @ A2)[2, 2])) * s
-            j = np.searchsorted(imu.t, t0)
-            f_b = imu.f_ib_b[max(0, j - int(round(0.5 / imu.dt))):j + 1].mean(0)
-            f_n = c2[2] + np.array([0.0, 0.0, float(normal_gravity(lat, coef[0, 2]))])
-            Ct = _triad_nb(f_b, np.array([0.0, 1.0, 0.0]), f_n, v0 / np.linalg.norm(v0))
-            roll, pitch, _ = att.euler_from_dcm_nb(Ct)
-            s_tilt = np.hypot(sa, 0.3) / 9.8 + np.radians(1.0)
+            # straight and at constant speed: the specific force is gravity alone
+            j = np.searchsorted(imu.t, gnss.t[sl])
+            f_b = imu.f_ib_b[j[0]:j[-1] + 1].mean(0)
+            roll = np.arctan2(-f_b[0], f_b[2])
+            pitch = np.arctan2(f_b[1], np.hypot(f_b[0], f_b[2]))
+            s_tilt = np.radians(4.0)
         s_hdg = np.arctan2(sv, speed) + np.radians(2.0)
-        return dict(t=t0, lat=lat, lon=lon, h=coef[0, 2], velocity_n=v0,
-                    C_nb=att.dcm_nb_from_euler(roll, pitch, hdg),
-                    sigmas=([2 * sp, 2 * sp, 3 * sp], [2 * sv, 2 * sv, 2 * sv + 0.2],
-                            [2 * s_tilt, 2 * s_tilt, 2 * s_hdg]))
-    raise SelfnavError(f"no run of {W} mutually consistent GNSS fixes moving faster than "
-                       f"{cfg.min_init_speed} m/s to start from (heading needs motion)")
-
+        out.update(C_nb=att.dcm_nb_from_euler(roll, pitch, hdg),
+                   sigmas=([2 * sp, 2 * sp, 3 * sp], [2 * sv, 2 * sv, 2 * sv + 0.2],
+                           [s_tilt, s_tilt, 2 * s_hdg]))
+        return out
+    raise SelfnavError(f"no run of {W} mutually consistent GNSS fixes on a straight line faster "
+                       f"than {cfg.min_init_speed} m/s to start from (heading needs motion)")
 
 
 class _FixStore:
@@ -233,6 +257,9 @@ class StreamingNavigator:
             flt.P[IR, IR] = np.diag(np.square(sp))
             flt.P[IV, IV] = np.diag(np.square(sv))
             flt.P[IP, IP] = np.diag(np.square(sa))
+        if "gyro_bias" in init:
+            flt.bg = np.array(init["gyro_bias"], dtype=float)
+            flt.P[IBG, IBG] = np.diag(np.square(init["gyro_bias_sigma"]))
         self.flt = flt
         self.t0 = t0
         self.road_aid = road_aid
@@ -406,7 +433,8 @@ class StreamingNavigator:
         dx = np.zeros(flt.nx)
         # soft gate: a fix a little beyond the χ² gate is used with R inflated by NIS/gate
         # (Huber-like): real model errors are not Gaussian, outliers of 200 m are far beyond
-        ok = nis <= cfg.gate * (cfg.soft_gate if cfg.robust else 1.0)
+        soft = cfg.robust and np.hypot(r[0], r[1]) <= max(cfg.soft_gate_max_m, 3.0 * sh[k])
+        ok = nis <= cfg.gate * (cfg.soft_gate if soft else 1.0)
         if cfg.robust:
             # window test: displacements between fixes against the INS displacement, which stays
             # accurate when the absolute INS position has drifted (P cannot weaken it)
@@ -437,7 +465,7 @@ class StreamingNavigator:
                             dx = flt._kalman(r, H, R_d)
                             self.degraded += 1
             elif len(self.win) > 1:
-                ok = ok and _disp_ok(self.win[-2], self.win[-1], fx, sh, sv_, s_vel)
+                ok = ok and _window_consistent(self.win, fx, sh, sv_, s_vel)
         self.mode[k] = int(self.suspect)
         if ok:
             dx = flt._kalman(r, H, R * max(1.0, nis / cfg.gate))
@@ -561,7 +589,33 @@ def _white_scale(sus, cfg):
 
 
 def _window_consistent(buf, gnss, sig_h, sig_v, sv):
-    """All consecutive pairs in the window agree through the INS displacement."""
-    return all(_disp_ok(buf[i], buf[i + 1], gnss, sig_h, sig_v, sv) for i in range(len(buf) - 1))
+    """The fixes of the window share one offset from the INS displacement (χ², 0.999).
+
+    ``d_i = z_i − (INS displacement)_i`` is the same for every fix of a healthy window (the INS
+    drift over a few seconds is ``sv·Δt``); the test is ``Σ |d_i − d̄|²/σ_i² ≤ χ²(3(W−1))``.
+    Stronger than pairwise tests against errors that wander between fixes (Gauss–Markov
+    outliers), and P cannot weaken it.
+    """
+    if len(buf) < 2:
+        return True
+    k0, s0 = buf[0]
+    d, var = [], []
+    tm = np.mean([gnss.t[k] for k, _ in buf])
+    for k, snap in buf:
+        z = _enu_offset(gnss.lat[k0], gnss.lon[k0], gnss.h[k0], gnss.lat[k], gnss.lon[k], gnss.h[k])
+        d.append(z - (snap - s0))
+        drift2 = (sv * (gnss.t[k] - tm)) ** 2
+        var.append([sig_h[k] ** 2 + drift2, sig_h[k] ** 2 + drift2, sig_v[k] ** 2 + drift2])
+    d, var = np.array(d), np.array(var)
+    w = 1.0 / var
+    mean = np.sum(d * w, axis=0) / np.sum(w, axis=0)
+    chi2 = float(np.sum((d - mean) ** 2 * w))
+    return chi2 <= _chi2_999(3 * (len(buf) - 1))
+
+
+@functools.lru_cache(maxsize=64)
+def _chi2_999(dof):
+    """0.999 quantile of χ²(dof)."""
+    return float(chi2.ppf(0.999, dof))
 
 
