@@ -207,29 +207,30 @@ def _solve_batched(N, b):
         return np.einsum("eij,ej->ei", np.linalg.pinv(N), b)
 
 
-def _wls(x, pr, w, sat, sys_col, K, sagnac, max_iter, tol):
-    """Gauss–Newton iterations of (3) for all epochs at once; w = 0 for unused observations."""
-    n = 3 + K
-    eye = np.eye(n)
-    for _ in range(max_iter):
-        pred, H = _model(x, sat, sys_col, K, sagnac)
-        r = pr - pred
-        HW = H * w[..., None]
-        N = np.einsum("esi,esj->eij", HW, H)
-        # clocks of systems with no used satellite: keep them fixed (unit diagonal, zero rhs)
-        absent = np.diagonal(N, axis1=1, axis2=2)[:, 3:] == 0
-        N[:, 3:, 3:] += absent[:, :, None] * eye[3:, 3:][None]
-        b = np.einsum("esi,es->ei", HW, r)
-        dx = _solve_batched(N, b)
-        x = x + dx
-        if np.max(np.abs(dx[:, :3])) < tol:
-            break
+def _normal_equations(x, pr, w, sat, sys_col, K, sagnac, eye):
+    """Residuals, design matrix, normal matrix and right-hand side of (3) at ``x``.
+
+    Clocks of systems with no used satellite are held fixed (unit diagonal, zero right side).
+    """
     pred, H = _model(x, sat, sys_col, K, sagnac)
     r = pr - pred
     HW = H * w[..., None]
     N = np.einsum("esi,esj->eij", HW, H)
     absent = np.diagonal(N, axis1=1, axis2=2)[:, 3:] == 0
     N[:, 3:, 3:] += absent[:, :, None] * eye[3:, 3:][None]
+    return r, H, N, np.einsum("esi,es->ei", HW, r), absent
+
+
+def _wls(x, pr, w, sat, sys_col, K, sagnac, max_iter, tol):
+    """Gauss–Newton iterations of (3) for all epochs at once; w = 0 for unused observations."""
+    eye = np.eye(3 + K)
+    for _ in range(max_iter):
+        _, _, N, b, _ = _normal_equations(x, pr, w, sat, sys_col, K, sagnac, eye)
+        dx = _solve_batched(N, b)
+        x = x + dx
+        if np.max(np.abs(dx[:, :3])) < tol:
+            break
+    r, H, N, _, absent = _normal_equations(x, pr, w, sat, sys_col, K, sagnac, eye)
     try:
         Ninv = np.linalg.inv(N)
     except np.linalg.LinAlgError:      # a degenerate geometry somewhere: pseudo-inverse there
