@@ -160,12 +160,15 @@ def register(app: typer.Typer) -> None:
             if method == "seed":
                 res = _run_seed(data, g, graph, mag, matcher, ins_datum, declination_deg, progress)
             else:
-                aid = None
+                aid = init = None
                 if graph is not None:
                     from selfnav.roadnav import EkfRoadAid
+                    from selfnav.seedloop import robust_init
 
                     aid = EkfRoadAid(graph, g)
-                res = ekf.run_filter(data, g, cfg, smooth=smooth, progress=progress, road_aid=aid)
+                    init = robust_init(data, g)
+                res = ekf.run_filter(data, g, cfg, init=init, smooth=smooth, progress=progress,
+                                     road_aid=aid)
         finally:
             if bar is not None:
                 bar.stop()

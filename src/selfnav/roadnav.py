@@ -1,0 +1,500 @@
+"""Road-constrained particle matcher driven by the INS (issue 5: beyond seed 004).
+
+GNSS-only map matchers fail inside long outlier windows (DESIGN §7): only the inertial prediction
+— travelled distance and heading against the road heading — holds the right road. This module
+keeps a cloud of hypotheses (particles) *on the directed road graph*; each is a directed segment
+and an offset along it. Per step:
+
+* **predict** — every particle travels the INS distance ``ΔS`` (seed 004 (13)) with a relative
+  and an absolute error; at the end of a segment it takes a successor chosen at random with a
+  probability that falls with the angle between the successor's direction and the vehicle
+  heading (junctions); rarely it turns round onto the opposite direction (U-turns, dead ends);
+* **weigh by heading** — ``N(road heading − vehicle heading; σ_K)`` with a floor (corner arcs,
+  magnetometer errors). A corner is where the along-track error is pinned: a particle that
+  turns too early or too late disagrees with the heading;
+* **weigh by GNSS** — only while GNSS looks healthy (:meth:`RoadParticles.gnss_health`:
+  fix-to-fix steps against the travel), with a robust two-component likelihood, nominal ``σ``
+  and outlier ``σ_out`` (seed 004: 10 m and 200 m) mixed with prior ``ε``: an unflagged 200 m
+  fix is explained by the broad component almost equally at every particle, so it neither pulls
+  the cloud along nor off the road. Each particle also carries its own INS speed error;
+* **resample** (systematic) when the effective sample size drops below half;
+* **re-seed** when GNSS is healthy again (fix-to-fix steps consistent with the nominal σ) and
+  consistently far from the estimate: part of the cloud is re-drawn on the roads around the
+  fixes (lost track, a wrong branch at start-up, a missed U-turn).
+
+The estimate is the densest cluster (weight within ``cluster_radius``), its weighted mean snapped
+onto the best particle's segment: a position on the centre line, the road heading, and a spread.
+
+Used three ways: inside the seed 004 slow loop as its identification step (``--method seed
+--matcher mht``, :mod:`selfnav.seedloop`), as the ``road_aid`` of the EKF (``--method ekf
+--map``, :class:`EkfRoadAid`: cross-track and road-heading constraint), and stand-alone.
+
+Headings are clockwise from grid North of the map's local projection; the meridian convergence
+(below 0.02° over the shipped maps) is neglected.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from selfnav.roads import RoadGraph
+
+TWO_PI = 2.0 * np.pi
+
+
+def wrap(a):
+    """Angle to (−π, π]."""
+    return (np.asarray(a) + np.pi) % TWO_PI - np.pi
+
+
+def successor_table(graph: RoadGraph):
+    """CSR successors of each directed segment: ``succ[off[s]:off[s+1]]`` leave ``seg_v[s]``.
+
+    The opposite direction of the same road (the twin) is left out unless it is the only way on
+    (a dead end). Returns ``(off, succ)``.
+    """
+    order = np.argsort(graph.seg_u, kind="stable")
+    starts = np.searchsorted(graph.seg_u[order], np.arange(graph.n_nodes + 1))
+    off = [0]
+    succ = []
+    for s in range(graph.n_segments):
+        v = graph.seg_v[s]
+        out = order[starts[v]:starts[v + 1]]
+        keep = out[out != graph.seg_twin[s]]
+        if len(keep) == 0:
+            keep = out
+        succ.extend(keep.tolist())
+        off.append(len(succ))
+    return np.asarray(off, np.int64), np.asarray(succ, np.int64)
+
+
+@njit(cache=True)
+def _move(seg, along, dist, seg_len, seg_heading, seg_twin, off, succ, heading, sig_turn,
+          p_uturn, rnd_u, rnd):  # pragma: no cover - numba
+    """Advance particles along the graph in place (see the module docstring)."""
+    n = len(seg)
+    for i in range(n):
+        s = seg[i]
+        if rnd_u[i] < p_uturn and seg_twin[s] >= 0:
+            along[i] = seg_len[s] - along[i]
+            s = seg_twin[s]
+        a = along[i] + dist[i]
+        if a < 0.0:
+            a = 0.0
+        hops = 0
+        while a > seg_len[s] and hops < 50:
+            a -= seg_len[s]
+            k0, k1 = off[s], off[s + 1]
+            if k1 == k0:
+                a = seg_len[s]
+                break
+            tot = 0.0
+            for k in range(k0, k1):
+                d = seg_heading[succ[k]] - heading
+                d = (d + np.pi) % (2 * np.pi) - np.pi
+                tot += np.exp(-0.5 * (d / sig_turn) ** 2) + 1e-3
+            r = rnd[i, hops % rnd.shape[1]] * tot
+            acc = 0.0
+            nxt = succ[k1 - 1]
+            for k in range(k0, k1):
+                d = seg_heading[succ[k]] - heading
+                d = (d + np.pi) % (2 * np.pi) - np.pi
+                acc += np.exp(-0.5 * (d / sig_turn) ** 2) + 1e-3
+                if r <= acc:
+                    nxt = succ[k]
+                    break
+            s = nxt
+            hops += 1
+        seg[i] = s
+        along[i] = a
+
+
+@dataclass
+class MatcherConfig:
+    """Noise model of :class:`RoadParticles` (SI units, radians)."""
+
+    n: int = 400
+    sigma_gnss: float = 10.0          # nominal GNSS σ per axis, m (seed 004: 10 m)
+    sigma_outlier: float = 200.0      # outlier σ, m (seed 004: 200 m)
+    outlier_prob: float = 0.3         # prior share of outliers in the robust likelihood
+    travel_rel: float = 0.01          # relative error of the INS travel per step
+    travel_abs: float = 0.3           # absolute error of the INS travel, m/√s
+    speed_sigma: float = 1.0          # initial σ of each particle's INS speed error, m/s
+    speed_rw: float = 0.05            # its random walk, m/s/√s
+    sigma_heading: float = np.radians(20.0)
+    heading_floor: float = 0.02       # likelihood floor (corner arcs, magnetometer errors)
+    sigma_turn: float = np.radians(35.0)  # junction branch choice
+    p_uturn: float = 2e-3             # per particle and step
+    cluster_radius: float = 20.0
+    seed_radius: float = 40.0         # roads within this of a fix when (re-)seeding, m
+    reseed_window: int = 8            # fixes judged for re-seeding
+    health_window: int = 5            # fix-to-fix steps judged for GNSS health
+    reseed_far: float = 15.0          # mean fix offset from the estimate that means lost, m
+    reseed_share: float = 0.5         # share of the cloud re-drawn
+
+
+class RoadParticles:
+    """The particle cloud on the road graph (module docstring).
+
+    Parameters
+    ----------
+    graph : RoadGraph
+    cfg : MatcherConfig
+    seed : int, optional
+        Random stream.
+    """
+
+    def __init__(self, graph: RoadGraph, cfg: MatcherConfig | None = None, seed=None):
+        self.g = graph
+        self.cfg = cfg or MatcherConfig()
+        self.rng = np.random.default_rng(seed)
+        self.off, self.succ = successor_table(graph)
+        self.seg = np.zeros(0, np.int64)
+        self.along = np.zeros(0)
+        self.logw = np.zeros(0)
+        self.dv = np.zeros(0)
+        self._resid = []          # recent (fix − estimate) offsets, for re-seeding
+        self._disp = np.zeros(2)  # INS displacement since the last fix (from predict), m
+        self._prev_fix = None
+        self._steps = []          # recent |fix step − INS displacement|, m
+        self.healthy = False
+        self.used_fixes = 0
+        self.reseeds = 0
+        self.last = None
+
+    # ------------------------------------------------------------------ seeding
+    def _draw_on_roads(self, xy, radius, n, heading=None):
+        """``n`` points uniform on the parts of the roads inside the disc (weighted by the
+        agreement of their direction with ``heading`` when given)."""
+        g = self.g
+        import shapely
+
+        from selfnav.roads import project_points_to_segments
+
+        xy = np.asarray(xy, float)
+        si = np.asarray(g.tree.query(shapely.points(xy), predicate="dwithin",
+                                     distance=radius), np.int64)
+        if len(si) == 0:
+            si = g.candidates(np.atleast_2d(xy), radius, k=4, per_way=False).seg
+            radius = float(radius) + float(np.min(g.candidates(np.atleast_2d(xy), radius, k=1,
+                                                               per_way=False).dist)) + 1.0
+        a, b = g.xy[g.seg_u[si]], g.xy[g.seg_v[si]]
+        s0, cross, _, _ = project_points_to_segments(np.broadcast_to(xy, a.shape), a, b)
+        # the unclipped foot and the half-chord of the disc along each segment
+        u = (b - a) / np.maximum(g.seg_len[si], 1e-9)[:, None]
+        s_foot = np.sum((xy - a) * u, axis=1)
+        hc = np.sqrt(np.maximum(radius**2 - cross**2, 0.0))
+        lo = np.clip(s_foot - hc, 0.0, g.seg_len[si])
+        hi = np.clip(s_foot + hc, 0.0, g.seg_len[si])
+        p = np.maximum(hi - lo, 1e-3)
+        if heading is not None:
+            dh = np.abs(wrap(g.seg_heading[si] - heading))
+            p = p * (np.exp(-0.5 * (dh / np.radians(45.0)) ** 2) + 1e-3)
+        k = self.rng.choice(len(si), size=n, p=p / p.sum())
+        along = lo[k] + self.rng.uniform(0.0, 1.0, n) * (hi[k] - lo[k])
+        return si[k].copy(), along
+
+    def seed(self, xy, radius=None, heading=None):
+        """(Re)start the cloud on the roads within ``radius`` of ``xy`` (local m)."""
+        r = self.cfg.seed_radius if radius is None else radius
+        self.seg, self.along = self._draw_on_roads(np.asarray(xy, float), r, self.cfg.n, heading)
+        self.dv = self.cfg.speed_sigma * self.rng.normal(size=self.cfg.n)
+        self.logw = np.zeros(self.cfg.n)
+        self._resid = []
+
+    @property
+    def initialized(self) -> bool:
+        return len(self.seg) > 0
+
+    # ---------------------------------------------------------------- prediction
+    def predict(self, ds, heading, dt=1.0):
+        """Travel ``ds`` m (INS, seed (13)) over ``dt`` s with the vehicle heading ``heading``.
+
+        Each particle also carries its own error of the INS speed (a random walk), so that a
+        biased INS speed is a hypothesis the GNSS and the corners can select, not a drift.
+        """
+        c = self.cfg
+        n = len(self.seg)
+        self.dv += c.speed_rw * np.sqrt(max(dt, 0.0)) * self.rng.normal(size=n)
+        moving = ds > 0.05 * dt
+        dist = ds * (1.0 + c.travel_rel * self.rng.normal(size=n)) \
+            + c.travel_abs * np.sqrt(max(dt, 0.0)) * self.rng.normal(size=n) \
+            - (self.dv * dt if moving else 0.0)
+        _move(self.seg, self.along, dist, self.g.seg_len, self.g.seg_heading, self.g.seg_twin,
+              self.off, self.succ, float(heading), c.sigma_turn, c.p_uturn,
+              self.rng.uniform(size=n), self.rng.uniform(size=(n, 4)))
+        # the displacement for the GNSS health test follows the road once the cloud has an
+        # estimate (the map-corrected course, seed (12)); the vehicle heading may be poor
+        h_disp = heading if self.last is None or self.last["share"] < 0.8 else self.last["heading"]
+        self._disp += ds * np.array([np.sin(h_disp), np.cos(h_disp)])
+        # heading errors are correlated over seconds: at step dt the log-likelihood is
+        # tempered by min(dt, 1 s), so a 5 Hz caller does not count one error five times
+        self.weigh_heading(heading, min(max(dt, 0.0), 1.0))
+
+    def weigh_heading(self, heading, power=1.0):
+        c = self.cfg
+        d = wrap(self.g.seg_heading[self.seg] - heading)
+        self.logw += power * np.log(np.exp(-0.5 * (d / c.sigma_heading) ** 2) + c.heading_floor)
+        self._normalize()
+
+    # ------------------------------------------------------------------- update
+    def positions(self):
+        return self.g.segment_points(self.seg, self.along)
+
+    def likelihood_gnss(self, xy, sigma=None):
+        """Robust GNSS likelihood of every particle (module docstring)."""
+        c = self.cfg
+        s = c.sigma_gnss if sigma is None else float(sigma)
+        d2 = np.sum((self.positions() - xy) ** 2, axis=1)
+        nom = np.exp(-0.5 * d2 / s**2) / s**2
+        out = np.exp(-0.5 * d2 / c.sigma_outlier**2) / c.sigma_outlier**2
+        return (1.0 - c.outlier_prob) * nom + c.outlier_prob * out
+
+    def gnss_health(self, xy, sigma=None) -> bool:
+        """Is GNSS healthy? Fix-to-fix steps minus the INS displacement over the last
+        ``health_window`` fixes: median below 1.5·√2·σ·1.18 (the Rayleigh median) and the
+        newest below 3·√2·σ. White 200 m outliers and drifting ones (tens of metres per
+        second) fail it; nominal fixes pass about 95 % of the time."""
+        c = self.cfg
+        s = c.sigma_gnss if sigma is None else float(sigma)
+        if self._prev_fix is not None:
+            self._steps.append(float(np.hypot(*(xy - self._prev_fix - self._disp))))
+            self._steps = self._steps[-c.health_window:]
+        self._prev_fix = np.array(xy, float)
+        self._disp = np.zeros(2)
+        if len(self._steps) < c.health_window:
+            return False
+        r = np.sqrt(2.0) * s
+        return bool(np.median(self._steps) < 1.5 * 1.18 * r and self._steps[-1] < 3.0 * r)
+
+    def update_gnss(self, xy, sigma=None):
+        """Weigh by one GNSS fix (local m) when GNSS is healthy (:meth:`gnss_health`, the
+        robust likelihood then guards the rest); re-seed when lost (module docstring).
+        Returns whether the fix was used."""
+        xy = np.asarray(xy, float)
+        self.healthy = self.gnss_health(xy, sigma)
+        if not self.healthy:
+            self._resid = []
+            return False
+        self.weigh_gnss(xy, sigma)
+        return True
+
+    def weigh_gnss(self, xy, sigma=None):
+        """Weigh by a fix already judged healthy (robust likelihood), re-seed if lost,
+        resample."""
+        xy = np.asarray(xy, float)
+        self._disp = np.zeros(2)
+        self.logw += np.log(self.likelihood_gnss(xy, sigma) + 1e-300)
+        self._normalize()
+        self._maybe_reseed(xy, sigma)
+        self._maybe_resample()
+        self.used_fixes += 1
+
+    def _normalize(self):
+        self.logw -= self.logw.max()
+
+    def weights(self):
+        w = np.exp(self.logw - self.logw.max())
+        return w / w.sum()
+
+    def _maybe_resample(self):
+        w = self.weights()
+        if 1.0 / np.sum(w * w) < 0.5 * len(w):
+            n = len(w)
+            u = (self.rng.uniform() + np.arange(n)) / n
+            idx = np.minimum(np.searchsorted(np.cumsum(w), u), n - 1)
+            self.seg, self.along = self.seg[idx].copy(), self.along[idx].copy()
+            self.dv = self.dv[idx].copy()
+            self.logw = np.zeros(n)
+
+    def _maybe_reseed(self, xy, sigma):
+        c = self.cfg
+        s = c.sigma_gnss if sigma is None else float(sigma)
+        est = self.estimate()
+        self._resid.append(xy - est["xy"])
+        self._resid = self._resid[-c.reseed_window:]
+        if len(self._resid) < c.reseed_window:
+            return
+        r = np.asarray(self._resid)
+        step = np.hypot(*np.diff(r, axis=0).T)
+        healthy = np.median(step) < 1.8 * s * np.sqrt(2.0) and np.max(step) < 5.0 * s
+        far = np.hypot(*r.mean(axis=0)) > max(c.reseed_far, 1.5 * s)
+        if healthy and far:
+            n = len(self.seg)
+            k = int(c.reseed_share * n)
+            idx = self.rng.choice(n, size=k, replace=False)
+            seg, along = self._draw_on_roads(xy, max(c.seed_radius, 3.0 * s), k,
+                                             est["heading"])
+            self.seg[idx], self.along[idx] = seg, along
+            self.dv[idx] = c.speed_sigma * self.rng.normal(size=k)
+            self.logw[idx] = np.median(self.logw)
+            # the new draws are then judged by the next fixes like every other particle
+            self._resid = []
+            self.reseeds += 1
+
+    # ----------------------------------------------------------------- estimate
+    def estimate(self) -> dict:
+        """The densest cluster: position on the road, segment, road heading, spread, share."""
+        c = self.cfg
+        w = self.weights()
+        p = self.positions()
+        # density of weight on a grid of cluster_radius cells, summed over 3 × 3 neighbours
+        R = c.cluster_radius
+        cell = np.floor(p / R).astype(np.int64)
+        key = cell[:, 0] * 1_000_003 + cell[:, 1]
+        ukey, inv = np.unique(key, return_inverse=True)
+        cw = np.bincount(inv, weights=w)
+        dens = np.zeros(len(ukey))
+        for dx in (-1, 0, 1):
+            for dy in (-1, 0, 1):
+                q = ukey + dx * 1_000_003 + dy
+                j = np.minimum(np.searchsorted(ukey, q), len(ukey) - 1)
+                dens += np.where(ukey[j] == q, cw[j], 0.0)
+        near = np.abs(cell - cell[np.argmax(dens[inv])]).max(axis=1) <= 1
+        centre_xy = (w[near] @ p[near]) / w[near].sum()
+        m = np.sum((p - centre_xy) ** 2, axis=1) < R**2
+        if not m.any():
+            m = near
+        wm = w[m] / w[m].sum()
+        mean = wm @ p[m]
+        # snap onto the best segment among the cluster's (the most weight)
+        segs, inv = np.unique(self.seg[m], return_inverse=True)
+        sw = np.bincount(inv, weights=wm)
+        best = int(segs[int(np.argmax(sw))])
+        a = self.g.xy[self.g.seg_u[best]]
+        u = self.g.xy[self.g.seg_v[best]] - a
+        L = max(self.g.seg_len[best], 1e-9)
+        along = float(np.clip((mean - a) @ u / L, 0.0, L))
+        foot = a + u / L * along
+        spread = float(np.sqrt(wm @ np.sum((p[m] - mean) ** 2, axis=1)))
+        self.last = {"xy": foot, "seg": best, "along": along,
+                     "heading": float(self.g.seg_heading[best]), "spread": spread,
+                     "share": float(w[m].sum())}
+        return self.last
+
+
+def _heading_of(C_nb):
+    """True heading (rad, clockwise from North) of the forward axis of ``C_nb`` (DESIGN §2)."""
+    fwd = C_nb[1]
+    return float(np.arctan2(fwd[0], fwd[1]) % TWO_PI)
+
+
+class EkfRoadAid:
+    """``road_aid`` for :func:`selfnav.ekf.run_filter` (``--method ekf --map``).
+
+    At every aiding epoch the cloud travels the INS distance since the last call with the INS
+    heading and consumes the GNSS fixes that have arrived. Once per ``interval`` it returns the
+    cross-track and road-heading constraint of :meth:`InsGnssFilter.update_road` — only when
+    the cloud is confident (share ≥ 0.8), agrees with the filter within ``max(10 m, 3σ)``, the
+    vehicle is not turning (> 3°/s) and is not within 15 m of a bend (the driven arc leaves the
+    centre line there). ``along=True`` adds an along-track constraint from the cloud while GNSS
+    is unhealthy (measured: no gain; off by default).
+
+    Parameters
+    ----------
+    graph : RoadGraph
+    gnss : GnssData (WGS-84)
+    cfg : MatcherConfig
+    sigma_cross : σ of the cross-track constraint, m (lane position and digitising error)
+    sigma_heading : σ of the road-heading constraint, rad (None: no heading constraint)
+    along : along-track constraint while GNSS is unhealthy
+    interval : s between constraints (the cloud's errors are correlated over seconds)
+    seed : random stream
+    """
+
+    def __init__(self, graph: RoadGraph, gnss, cfg: MatcherConfig | None = None, *,
+                 sigma_cross=1.0, sigma_heading=np.radians(5.0), along=False, interval=1.0,
+                 seed=0):
+        self.g = graph
+        self.pf = RoadParticles(graph, cfg, seed)
+        x, y = graph.to_local(gnss.lat, gnss.lon)
+        self.fix_t = np.asarray(gnss.t, float)
+        self.fix_xy = np.column_stack([x, y])
+        self.sig = (np.asarray(gnss.sigma_m, float) if gnss.sigma_m is not None
+                    else np.full(len(gnss.t), self.pf.cfg.sigma_gnss))
+        self.k = 0
+        self.t_last = None
+        self.sigma_cross = sigma_cross
+        self.sigma_heading = sigma_heading
+        self.along = along
+        self.t_along = -np.inf
+        self.hdg_last = None
+        self.t_constraint = -np.inf
+        self.interval = interval
+        self.history = []      # (t, x, y, seg, spread, share)
+        self.corner = self._corner_nodes()
+
+    def _corner_nodes(self):
+        """Per segment: does it end (start) in a bend of more than 20° on some way on?"""
+        g = self.g
+        off, succ = self.pf.off, self.pf.succ
+        end_bend = np.zeros(g.n_segments, bool)
+        for s in range(g.n_segments):
+            nx = succ[off[s]:off[s + 1]]
+            if len(nx) and np.any(np.abs(wrap(g.seg_heading[nx] - g.seg_heading[s]))
+                                  > np.radians(20.0)):
+                end_bend[s] = True
+        start_bend = np.zeros(g.n_segments, bool)
+        for s in range(g.n_segments):
+            for q in succ[off[s]:off[s + 1]]:
+                if end_bend[s]:
+                    start_bend[q] = True
+        return end_bend, start_bend
+
+    def __call__(self, t, flt):
+        ins = flt.ins
+        x, y = self.g.to_local(ins.lat, ins.lon)
+        p_ins = np.array([float(x), float(y)])
+        hdg = _heading_of(ins.C_nb)
+        pf = self.pf
+        if not pf.initialized:
+            pf.seed(p_ins, max(pf.cfg.seed_radius, 3.0 * float(np.sqrt(flt.P[0, 0] + flt.P[1, 1]))),
+                    heading=hdg)
+            self.t_last = t
+        v = ins.velocity_n
+        dt = t - self.t_last
+        ds = float(np.hypot(v[0], v[1])) * dt
+        self.t_last = t
+        turn = abs(float(wrap(hdg - self.hdg_last))) / max(dt, 1e-3) if self.hdg_last is not None \
+            else 0.0
+        self.hdg_last = hdg
+        pf.predict(ds, hdg, dt)
+        while self.k < len(self.fix_t) and self.fix_t[self.k] <= t:
+            pf.update_gnss(self.fix_xy[self.k], self.sig[self.k])
+            self.k += 1
+        est = pf.estimate()
+        self.history.append((t, *est["xy"], est["seg"], est["spread"], est["share"]))
+        if est["share"] < 0.8:
+            return None
+        # the cloud and the filter disagree by more than the filter's own uncertainty allows:
+        # one of them is on another road; constraining the filter then would make it two
+        sig_p = float(np.sqrt(max(flt.P[0, 0] + flt.P[1, 1], 0.0)))
+        if float(np.hypot(*(p_ins - est["xy"]))) > max(10.0, 3.0 * sig_p):
+            return None
+        h = est["heading"]
+        d = np.array([np.sin(h), np.cos(h)])
+        nrm = np.array([d[1], -d[0]])           # right of travel
+        r = p_ins - est["xy"]
+        L = self.g.seg_len[est["seg"]]
+        end_bend, start_bend = self.corner
+        near = ((end_bend[est["seg"]] and L - est["along"] < 15.0)
+                or (start_bend[est["seg"]] and est["along"] < 15.0))
+        # along-track from the cloud only while GNSS is judged unhealthy (outlier windows):
+        # with healthy GNSS the EKF's own along-track is better and the two share the fixes
+        if (self.along and not pf.healthy and pf.used_fixes > 0 and t - self.t_along >= 1.0
+                and est["spread"] < 6.0):
+            self.t_along = t
+            flt.update_road(d, float(r @ d), max(3.0, 2.0 * est["spread"]))
+        if near or turn > np.radians(3.0):
+            # corner arcs leave the centre line, and the road heading is not the vehicle's
+            return None
+        # the cloud's error is correlated over seconds: one constraint per ``interval``
+        if t - self.t_constraint < self.interval - 1e-9:
+            return None
+        self.t_constraint = t
+        out = {"normal_n": nrm, "offset": float(r @ nrm), "sigma": self.sigma_cross}
+        if self.sigma_heading is not None:
+            out.update(heading=h, sigma_heading=self.sigma_heading)
+        return out
