@@ -124,9 +124,10 @@ class FilterConfig:
             "industrial": dict(arw=np.radians(0.15) / 60, vrw=2e-4, gyro_bias_sigma=np.radians(0.05),
                                accel_bias_sigma=0.02, gyro_bias_instability=np.radians(2.0) / 3600,
                                accel_bias_instability=1e-4, instability_tau=100),
+            # consumer MEMS: 1 % scale factors (BMI160 sheet) are estimated (21 states)
             "consumer": dict(arw=np.radians(0.007), vrw=180e-6 * 9.80665, gyro_bias_sigma=np.radians(1.0),
                              accel_bias_sigma=0.2, gyro_bias_instability=np.radians(10.0) / 3600,
-                             accel_bias_instability=5e-4, instability_tau=30),
+                             accel_bias_instability=5e-4, instability_tau=30, scale_factors=True),
         }
         if g not in presets:
             raise SelfnavError(f"unknown grade '{grade}' (use {', '.join(presets)} or consumer-car)")
