@@ -10,6 +10,7 @@ import contextlib
 import difflib
 import gzip
 import io
+import re
 import os
 import tempfile
 from pathlib import Path
@@ -82,6 +83,7 @@ def read_table(path, required, optional=(), *, numeric=True):
     """
     path = Path(path)
     text = _open_text(path)
+    plain = path.suffix != ".gz" and not text.startswith("\ufeff") and "\r" not in text[:4096]
     pos, line_no = 0, 0
     header_line = None
     while pos < len(text):
@@ -116,14 +118,17 @@ def read_table(path, required, optional=(), *, numeric=True):
     wanted = list(required) + [c for c in optional if c in index]
     body = text[pos:] if pos <= len(text) else ""
     lines = _LineNumbers(body, header_idx + 2)
-    if not body.strip() or all(not ln.strip() or ln.lstrip().startswith("#")
-                               for ln in body.split("\n", 50)[:50]) and len(lines) == 0:
+    if re.search(r"^[ \t]*[^#\s]", body, re.M) is None:
         raise InputError(path, "has a header but no data rows")
     ncol = len(names)
     usecols = [index[c] for c in wanted]
     try:
-        arr = np.loadtxt(io.StringIO(body), delimiter=delim, usecols=usecols, ndmin=2,
-                         comments="#", dtype=float)
+        if plain:  # numpy reads a file faster than a string buffer (about 1.0 s vs 1.6 s / 720k rows)
+            arr = np.loadtxt(path, delimiter=delim, usecols=usecols, ndmin=2, comments="#",
+                             dtype=float, skiprows=header_idx + 1, encoding="utf-8-sig")
+        else:
+            arr = np.loadtxt(io.StringIO(body), delimiter=delim, usecols=usecols, ndmin=2,
+                             comments="#", dtype=float)
     except ValueError:
         arr = None
     if arr is None:

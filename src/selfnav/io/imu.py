@@ -75,11 +75,11 @@ def check_imu_units(imu: ImuData, path=None) -> None:
     60 m/s^2 means cm/s^2, mg or counts; below 3 m/s^2 is not a specific force on Earth.
     """
     path = path or imu.source
-    w = np.linalg.norm(imu.omega_ib_b, axis=1)
+    w = np.sqrt(np.einsum("ij,ij->i", imu.omega_ib_b, imu.omega_ib_b))
     if np.mean(w > 35.0) > 0.01:
         raise InputError(path, f"gyro rates reach {np.max(w):.4g} (median {np.median(w):.4g}): "
                          "these look like deg/s or deg/h, the file needs rad/s", column="wx")
-    fn = np.linalg.norm(imu.f_ib_b, axis=1)
+    fn = np.sqrt(np.einsum("ij,ij->i", imu.f_ib_b, imu.f_ib_b))
     med = float(np.median(fn))
     if 0.7 < med < 1.4:
         raise InputError(path, f"median specific force is {med:.4g}: this looks like g units, the "
