@@ -127,7 +127,10 @@ class FilterConfig:
             # consumer MEMS: 1 % scale factors (BMI160 sheet) are estimated (21 states)
             "consumer": dict(arw=np.radians(0.007), vrw=180e-6 * 9.80665, gyro_bias_sigma=np.radians(1.0),
                              accel_bias_sigma=0.2, gyro_bias_instability=np.radians(10.0) / 3600,
-                             accel_bias_instability=5e-4, instability_tau=30, scale_factors=True),
+                             accel_bias_instability=5e-4, instability_tau=30, scale_factors=True,
+                             # a weaker NHC while the 1 °/s gyro biases leave the heading loose:
+                             # at 0.3 m/s it held a wrong heading on a simulated stop-and-go drive
+                             nhc_sigma=0.5),
         }
         if g not in presets:
             raise SelfnavError(f"unknown grade '{grade}' (use {', '.join(presets)} or consumer-car)")
