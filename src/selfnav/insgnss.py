@@ -24,7 +24,7 @@ from scipy.stats import chi2
 
 from selfnav import attitude as att
 from selfnav.earth import OMEGA_EARTH, normal_gravity, radii
-from selfnav.ekf import (CHI2_3_999, IBG, IP, IR, IV, FilterConfig, InsGnssFilter, _enu_offset, _pack,
+from selfnav.ekf import (IBG, IP, IR, IV, FilterConfig, InsGnssFilter, _enu_offset, _pack,
                          _rts, _unpack)
 from selfnav.errors import SelfnavError
 from selfnav.io.gnss import GnssData
@@ -77,16 +77,6 @@ def _consistent_run(p, t, sig, cfg):
         return False
     acc = np.linalg.norm(np.diff(v, axis=0), axis=1)
     return bool(np.all(acc < cfg.max_accel * dt.max() + 3 * np.sqrt(6) * np.max(sig) / dt.min()))
-
-
-def _triad_nb(b1, b2, n1, n2):
-    """``C_n^b`` with ``C_n^b n1 ∥ b1`` exactly and ``n2`` as close to ``b2`` as it can be."""
-    def frame(u, w):
-        u = u / np.linalg.norm(u)
-        c = np.cross(u, w)
-        c = c / np.linalg.norm(c)
-        return np.column_stack([u, c, np.cross(u, c)])
-    return frame(b1, b2) @ frame(n1, n2).T
 
 
 def _still_before(imu, t_end, gnss=None, g=9.8, window=1.0, lookback=30.0, accel_bias=0.0):
@@ -550,20 +540,6 @@ def run_filter(imu, gnss: GnssData, cfg: FilterConfig | None = None, *, init=Non
             progress((c + 1) / len(chunks))
     nav.finish()
     return nav.result(smooth)
-
-
-def _disp_ok(a, b, gnss, sig_h, sig_v, sv):
-    """Fix b agrees with fix a through the INS displacement (χ², 3 dof, 0.999).
-
-    ``sv`` is the INS velocity σ, m/s: the relative drift over the gap is ``sv·Δt``.
-    """
-    (ka, sa), (kb, sb) = a, b
-    dz = _enu_offset(gnss.lat[ka], gnss.lon[ka], gnss.h[ka], gnss.lat[kb], gnss.lon[kb], gnss.h[kb])
-    di = sb - sa  # INS displacement by propagation (see run_filter)
-    dtt = gnss.t[kb] - gnss.t[ka]
-    s2 = np.array([sig_h[ka] ** 2 + sig_h[kb] ** 2] * 2 + [sig_v[ka] ** 2 + sig_v[kb] ** 2]) + (sv * dtt) ** 2
-    d = dz - di
-    return float(np.sum(d * d / s2)) <= CHI2_3_999
 
 
 def _white_scale(sus, cfg):
