@@ -484,6 +484,9 @@ class StreamingNavigator:
             states, Ps = _rts(states, Ps, np.asarray(r["Pm"]), np.asarray(r["Phi"]),
                               np.asarray(r["dx"]))
             smoothed = True
+        # several epochs can share a time (a fix and an aiding epoch): keep the last state
+        last = np.r_[t[1:] != t[:-1], True] if len(t) else np.zeros(0, bool)
+        t, states, Ps = t[last], states[last], Ps[last]
         traj, sig, bg, ba = _unpack(t, states, Ps)
         st = np.asarray(self.status, int)
         stats = {"fixes": len(st), "accepted": int(np.sum(st == 1)),
