@@ -34,4 +34,10 @@ def register(app: typer.Typer) -> None:
               f"{a['roll_deg']:.4f}°")
         for w in a["warnings"]:
             print(f"  note: {w}")
+        nav = s["navigation_simulated"]
+        print(f"selfnav demo — {nav['note']}:")
+        for k, v in nav.items():
+            if k != "note":
+                print(f"  {k:20s} horizontal RMS {v['horizontal_rms_m']:6.1f} m, max "
+                      f"{v['horizontal_max_m']:6.1f} m")
         print(f"  report: {out / 'index.html'}")
