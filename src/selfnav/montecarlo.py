@@ -332,7 +332,11 @@ def run_montecarlo(name: str, runs: int, *, seed: int = 0, params: dict | None =
             if progress:
                 progress(len(idx))
     else:
-        from dask.distributed import as_completed
+        try:
+            from dask.distributed import as_completed
+        except ImportError:
+            raise SelfnavError("Dask is not installed: pip install 'selfnav[dask]', or run in "
+                               "this process with --workers 0") from None
 
         if client is None:
             client, own_cluster = _make_client(workers, scheduler)
