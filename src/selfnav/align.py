@@ -29,19 +29,33 @@ Three steps, used as the data allow:
     For a vehicle: heading from the GNSS course once the speed exceeds a threshold, roll and
     pitch from the specific force, both by one TRIAD — the body forward axis is along the GNSS
     velocity and the measured specific force equals ``a^n − g^n`` from the GNSS acceleration.
+``init_from_gnss``
+    The filter's in-motion start (:func:`selfnav.ekf.run_filter`): the first straight,
+    constant-speed run of mutually consistent fixes (unflagged outliers at start-up break it),
+    roll and pitch from the last still second before, honest initial σ.
 """
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.linalg import expm, solve_triangular
+from scipy.stats import chi2
 
 from selfnav import attitude as att
 from selfnav.earth import OMEGA_EARTH, normal_gravity, radii
 from selfnav.errors import SelfnavError
 from selfnav.latitude import estimate_latitude
 from selfnav.strapdown import integrate_imu
+from selfnav.ekf import FilterConfig, _enu_offset
+from selfnav.io.gnss import GnssData
+
+
+@functools.lru_cache(maxsize=64)
+def _chi2_999(dof):
+    """0.999 quantile of χ²(dof)."""
+    return float(chi2.ppf(0.999, dof))
 
 DEG = np.pi / 180.0
 DEG_PER_H = DEG / 3600.0
@@ -380,3 +394,150 @@ def align_in_motion(imu, t_gnss, velocity_n, lat, h=0.0, *, min_speed=5.0, windo
     return Alignment(float(tg[k]), C, sigma, "in motion (GNSS course + TRIAD)",
                      latitude=lat_k, velocity_n=v[k].copy(),
                      details={"speed": float(speed[k]), "epoch": k, "accel_n": a_n})
+
+
+# ---------------------------------------------------------------- in motion (vehicle, GNSS)
+
+def _consistent_run(p, t, sig, cfg):
+    """True if positions ``p`` (W, 2) at times ``t`` fit bounded speed and acceleration.
+
+    Second differences ``p_{k+1} − 2p_k + p_{k−1}`` must stay below ``a_max Δt² + 3·√6 σ``:
+    white outliers of 200 m break that at once (start-up, DESIGN §7).
+    """
+    dt = np.diff(t)
+    if np.any(dt > 5.0) or np.any(dt <= 0):
+        return False
+    v = np.diff(p, axis=0) / dt[:, None]
+    if np.any(np.linalg.norm(v, axis=1) > 70.0 + 3 * np.sqrt(2) * np.max(sig) / dt.min()):
+        return False
+    acc = np.linalg.norm(np.diff(v, axis=0), axis=1)
+    return bool(np.all(acc < cfg.max_accel * dt.max() + 3 * np.sqrt(6) * np.max(sig) / dt.min()))
+
+
+def _still_before(imu, t_end, gnss=None, g=9.8, window=1.0, lookback=30.0, accel_bias=0.0):
+    """Last still second within ``lookback`` s before ``t_end``: ``(index, a_bound)`` or None.
+
+    ``a_bound`` (m/s²) is the largest constant acceleration the tests below could have missed:
+    the levelling error it allows, ``atan(a_bound/g)``, goes into the tilt σ.
+
+    Still: gyro norm below 1 °/s, |f| steady to 0.05 m/s² and within 0.1 m/s² of gravity (a
+    constant acceleration is steady too), and the GNSS fixes around it not moving. The
+    accelerometers cannot tell a gentle constant acceleration (below ~1.4 m/s²) from rest, and
+    a 10 m receiver cannot either: the tilt σ of this path assumes a good receiver or a real
+    stop.
+    """
+    n = int(round(window / imu.dt))
+    j1 = np.searchsorted(imu.t, t_end)
+    j0 = np.searchsorted(imu.t, t_end - lookback)
+    for j in range(j1 - n, j0 - 1, -max(n // 4, 1)):
+        if j < 0:
+            break
+        w = imu.omega_ib_b[j:j + n]
+        fn = np.linalg.norm(imu.f_ib_b[j:j + n], axis=1)
+        if not (np.max(np.linalg.norm(w, axis=1)) < np.radians(1.0) and np.std(fn) < 0.05
+                and abs(np.mean(fn) - g) < 0.1):
+            continue
+        # |f| = sqrt(g² + a²) ≈ g + a²/2g: an acceleration below this hides in the |f| test
+        a_bound = np.sqrt(2.0 * g * (0.1 + accel_bias))
+        if gnss is not None:
+            m = (gnss.t >= imu.t[j] - 1.0) & (gnss.t <= imu.t[min(j + n, len(imu.t) - 1)] + 1.0)
+            if m.sum() >= 2:
+                d = _enu_offset(gnss.lat[m][0], gnss.lon[m][0], 0.0, gnss.lat[m][-1],
+                                gnss.lon[m][-1], 0.0)
+                span = gnss.t[m][-1] - gnss.t[m][0]
+                sig = float(np.max(gnss.sigma_m[m])) if gnss.sigma_m is not None else 5.0
+                tol = 0.2 * span + 3.0 * np.sqrt(2) * sig
+                if np.hypot(d[0], d[1]) > tol:
+                    continue
+                a_bound = min(a_bound, 2.0 * tol / span**2)
+        return j, float(a_bound)
+    return None
+
+
+def init_from_gnss(imu, gnss: GnssData, cfg: FilterConfig, sig_h):
+    """Initial state for a vehicle: the in-motion alignment.
+
+    1. The first window of fixes that fit bounded speed and acceleration *and* a straight line
+       at constant speed (χ² of the line fit), moving fast enough that the course is known
+       (speed above ``min_init_speed`` and four times its σ). The window is long enough for a
+       velocity σ of 0.5 m/s (a 10 m σ receiver at 1 Hz needs 17 fixes; at most 20).
+       Position and velocity from the fit at its centre, heading from the course (a car moves
+       along its body y axis).
+    2. Roll and pitch: levelled in the last still second before (GNSS confirms it is still),
+       carried to the start by the gyros; the still period also gives the gyro biases (mean
+       rate less the vertical Earth rate; the horizontal Earth rate is left in their σ).
+       Without a still period: levelled from the mean specific force over the straight,
+       constant-speed window.
+    """
+    n = len(gnss.t)
+    dtf = float(np.median(np.diff(gnss.t))) if n > 1 else 1.0
+    s_med = float(np.median(sig_h))
+    W = int(np.clip(np.ceil((12.0 * s_med**2 / (0.25 * dtf**2)) ** (1.0 / 3.0)), max(cfg.window, 3), 20))
+    lat0, lon0 = gnss.lat[0], gnss.lon[0]
+    rm, rn = radii(lat0, 0.0)
+    p = np.column_stack([(gnss.lon - lon0) * rn * np.cos(lat0), (gnss.lat - lat0) * rm, gnss.h])
+    for k in range(n - W + 1):
+        sl = slice(k, k + W)
+        if cfg.robust and not _consistent_run(p[sl, :2], gnss.t[sl], sig_h[sl], cfg):
+            continue
+        # a straight-line fit gives the *mean* velocity: exact at the centre of the window for a
+        # constant acceleration, so the filter starts at the centre time
+        t0 = float(np.mean(gnss.t[sl]))
+        tt = gnss.t[sl] - t0
+        A = np.column_stack([np.ones(W), tt])
+        coef, *_ = np.linalg.lstsq(A, p[sl], rcond=None)
+        s = float(np.max(sig_h[sl]))
+        res = p[sl, :2] - A @ coef[:, :2]
+        if float(np.sum(res**2)) / s**2 > _chi2_999(2 * (W - 2)):
+            continue  # turning or accelerating: the course is not one number
+        cov = np.linalg.inv(A.T @ A) * s * s
+        v0, sv = coef[1], float(np.sqrt(cov[1, 1]))
+        if gnss.velocity_n is not None:
+            v0 = np.array([np.interp(t0, gnss.t[sl], gnss.velocity_n[sl, i]) for i in range(3)])
+            sv = cfg.gnss_vel_sigma
+        speed = float(np.hypot(v0[0], v0[1]))
+        if speed <= max(cfg.min_init_speed, 6.0 * sv):
+            continue
+        sp = float(np.sqrt(cov[0, 0]))
+        lat = lat0 + coef[0, 1] / rm
+        lon = lon0 + coef[0, 0] / (rn * np.cos(lat0))
+        hdg = np.arctan2(v0[0], v0[1])
+        out = dict(t=t0, lat=lat, lon=lon, h=coef[0, 2], velocity_n=v0)
+        still = _still_before(imu, t0, gnss, float(normal_gravity(lat, coef[0, 2])),
+                              accel_bias=cfg.accel_bias_sigma)
+        if still is not None:
+            j0, a_bound = still
+            js, je = j0, j0 + int(round(1.0 / imu.dt))
+            f_lev = imu.f_ib_b[js:je].mean(0)
+            roll0 = np.arctan2(-f_lev[0], f_lev[2])
+            pitch0 = np.arctan2(f_lev[1], np.hypot(f_lev[0], f_lev[2]))
+            C0 = att.dcm_nb_from_euler(roll0, pitch0, 0.0)
+            # gyro biases: the mean rate less the vertical Earth rate (heading unknown)
+            up_b = f_lev / np.linalg.norm(f_lev)
+            w_mean = imu.omega_ib_b[js:je].mean(0)
+            bg = w_mean - up_b * OMEGA_EARTH * np.sin(lat)
+            sbg = np.sqrt(np.var(imu.omega_ib_b[js:je], axis=0) / (je - js)
+                          + (OMEGA_EARTH * np.cos(lat)) ** 2 + cfg.gyro_bias_instability**2)
+            out["gyro_bias"], out["gyro_bias_sigma"] = bg, sbg
+            j1 = np.searchsorted(imu.t, t0)
+            from selfnav.latitude import _gyro_attitude
+            dts = np.diff(imu.t[je - 1:j1 + 1], prepend=imu.t[je - 1] - imu.dt)
+            q = _gyro_attitude(np.ascontiguousarray(imu.omega_ib_b[je - 1:j1 + 1] - bg), dts)
+            C_bn = C0.T @ att.quat_to_dcm(q[-1])
+            roll, pitch, _ = att.euler_from_dcm_bn(C_bn)
+            dur = imu.t[j1] - imu.t[je - 1]
+            s_tilt = np.radians(0.3) + np.arctan(a_bound / 9.8) + float(np.max(sbg)) * dur
+        else:
+            # straight and at constant speed: the specific force is gravity alone
+            j = np.searchsorted(imu.t, gnss.t[sl])
+            f_b = imu.f_ib_b[j[0]:j[-1] + 1].mean(0)
+            roll = np.arctan2(-f_b[0], f_b[2])
+            pitch = np.arctan2(f_b[1], np.hypot(f_b[0], f_b[2]))
+            s_tilt = np.radians(4.0)
+        s_hdg = np.arctan2(sv, speed) + np.radians(2.0)
+        out.update(C_nb=att.dcm_nb_from_euler(roll, pitch, hdg),
+                   sigmas=([2 * sp, 2 * sp, 3 * sp], [2 * sv, 2 * sv, 2 * sv + 0.2],
+                           [s_tilt, s_tilt, 2 * s_hdg]))
+        return out
+    raise SelfnavError(f"no run of {W} mutually consistent GNSS fixes on a straight line faster "
+                       f"than {cfg.min_init_speed} m/s to start from (heading needs motion)")

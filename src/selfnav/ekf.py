@@ -4,6 +4,7 @@ The nominal state is carried by the strapdown mechanization (:class:`selfnav.str
 seed 004 fast loop); the filter estimates its errors
 
     δx = [δr (ENU, m), δv (ENU, m/s), ψ (rad), δb_g (rad/s), δb_a (m/s²)]        (15 states)
+         [+ δs_g, δs_a (scale factors, 6)] [+ δμ (IMU pitch and yaw to the vehicle, 2)]
 
 with ``δ(·) = estimated − true`` and the attitude error ``C̃_b^n = (I − [ψ]) C_b^n``. Error
 dynamics (psi-angle form, Groves ch. 14, simplified to what a MEMS or tactical IMU needs)::
@@ -16,6 +17,14 @@ dynamics (psi-angle form, Groves ch. 14, simplified to what a MEMS or tactical I
 
 Aiding: GNSS position with lever arm, GNSS velocity, non-holonomic constraint (a car does not
 slide sideways or jump), zero-velocity updates when the IMU is still, magnetometer heading.
+
+The non-holonomic constraint holds in the *vehicle* frame at a point that does not slip
+sideways (the rear-axle centre), not at the IMU: ``v_v = C_vb (C_bn^T v^n + ω_b × l_nhc)``
+with ``C_vb = exp([μ×])``, μ = (pitch, 0, yaw) of the IMU relative to the vehicle (small angles,
+positive nose-up and to the left). Unmodelled, a 0.5° mounting pitch makes the NHC tilt the INS
+by 0.5° while GNSS is out (a g·0.5° = 0.09 m/s² along-track error), and a 1.5 m lever turns
+a 0.5 rad/s parking turn into 0.75 m/s of "side slip"; ``mount_states`` estimates μ,
+``nhc_lever_b`` gives the lever.
 
 **Outliers nothing flags** (seed 004: up to 5 min at 200 m σ; DESIGN §7). A χ² innovation gate
 alone fails: while it rejects, P grows, and after a minute or two every outlier passes. selfnav
@@ -75,6 +84,7 @@ class FilterConfig:
     gnss_vel_sigma: float = 0.1
     nhc: bool = True                             # non-holonomic constraint (wheeled vehicle)
     nhc_sigma: float = 0.3                       # m/s, lateral and vertical body velocity
+    nhc_sigma_up: float | None = None            # m/s, vertical if it differs from lateral
     zupt: bool = True
     zupt_sigma: float = 0.02
     zupt_speed: float = 1.0                      # the INS speed must be below this, m/s
@@ -92,9 +102,25 @@ class FilterConfig:
     window: int = 6                              # fixes in the consistency window
     suspect_after: int = 2                       # consecutive rejections before suspect mode
     max_accel: float = 5.0                       # start-up motion model, m/s²
+    dr_guard: bool = True                        # with robust: shadow dead reckoning (drguard)
+    dr_branch: float = 30.0                      # s between shadows
+    dr_max_age: float = 90.0                     # s a shadow lives while GNSS is trusted
+    dr_min_age: float = 5.0                      # s before a shadow tests fixes
+    dr_step: float = 1.0                         # s between shadow updates
+    dr_att_sigma: float = np.radians(0.5)        # branch only when every attitude σ is below
+    dr_sigma_scale: float = 2.0                  # shadow σ inflation (EKF dead reckoning is optimistic)
+    dr_gate: float = 18.421                      # χ²₂(0.9999) of a fix against a shadow
+    dr_fit_sigma: float = 0.5                    # m/s: re-acquire after a run this sure of its speed
+    dr_max_suspect: float = 330.0                # s after which any consistent run re-acquires
+    dr_lost_sigma: float = np.inf                # m: … or once the dead reckoning σ exceeds this
+    dr_reacq_scale: float = 1.0                  # dead-reckoning σ inflation when re-acquiring
     min_init_speed: float = 5.0                  # heading from the GNSS course above this, m/s
     vertical: str = "free"
     scale_factors: bool = False                  # add gyro and accel scale-factor states (21)
+    mount_states: bool = False                   # estimate the IMU pitch/yaw to the vehicle (+2)
+    mount_rad: tuple = (0.0, 0.0)                # known (initial) mounting pitch, yaw, rad
+    mount_sigma: float = np.radians(2.0)         # its initial σ
+    nhc_lever_b: np.ndarray = field(default_factory=lambda: np.zeros(3))  # IMU -> rear axle, RFU
     gyro_sf_sigma: float = 0.01
     accel_sf_sigma: float = 0.01
 
@@ -172,10 +198,13 @@ class InsGnssFilter:
         self.ins = Strapdown(lat, lon, h, velocity_n, C_nb, t=t0, ellipsoid=ellipsoid,
                              vertical=cfg.vertical)
         self.nx = 21 if cfg.scale_factors else NX
+        self.imt = slice(self.nx, self.nx + 2) if cfg.mount_states else None
+        self.nx += 2 if cfg.mount_states else 0
         self.bg = np.zeros(3)
         self.ba = np.zeros(3)
         self.sg = np.zeros(3)
         self.sa = np.zeros(3)
+        self.mu = np.array(cfg.mount_rad, dtype=float)   # IMU pitch, yaw relative to the vehicle
         P = np.zeros((self.nx, self.nx))
         P[IR, IR] = np.eye(3) * cfg.init_pos_sigma**2
         P[IV, IV] = np.eye(3) * cfg.init_vel_sigma**2
@@ -185,6 +214,8 @@ class InsGnssFilter:
         if cfg.scale_factors:
             P[ISG, ISG] = np.eye(3) * cfg.gyro_sf_sigma**2
             P[ISA, ISA] = np.eye(3) * cfg.accel_sf_sigma**2
+        if cfg.mount_states:
+            P[self.imt, self.imt] = np.eye(2) * cfg.mount_sigma**2
         self.P = P
         self._f_n = np.array([0.0, 0.0, 9.8])
         self._w_b = np.zeros(3)
@@ -192,6 +223,7 @@ class InsGnssFilter:
         self._Phi_acc = np.eye(self.nx)  # transition since the last stored epoch (smoother)
         self._n_corr = 0
         self._I = np.eye(self.nx)
+        self._I3 = np.eye(3)
 
     # ------------------------------------------------------------------ model
     def _F(self, f_n, dt):
@@ -203,7 +235,7 @@ class InsGnssFilter:
         w_en = np.array([-v[1] / rm, v[0] / rn, v[0] * np.tan(lat) / rn])
         C_bn = self.ins.C_nb.T
         F = np.zeros((self.nx, self.nx))
-        F[IR, IV] = np.eye(3)
+        F[0, 3] = F[1, 4] = F[2, 5] = 1.0
         F[IV, IP] = _skew(f_n)
         F[IV, IV] = -_skew(2 * w_ie + w_en)
         F[IV, IBA] = -C_bn
@@ -211,8 +243,10 @@ class InsGnssFilter:
         F[5, 2] = 2.0 * g / (np.sqrt(rm * rn))
         F[IP, IP] = -_skew(w_ie + w_en)
         F[IP, IBG] = C_bn
-        F[IBG, IBG] = -np.eye(3) / cfg.gyro_bias_tau
-        F[IBA, IBA] = -np.eye(3) / cfg.accel_bias_tau
+        if np.isfinite(cfg.gyro_bias_tau):
+            F[IBG, IBG] = -self._I3 / cfg.gyro_bias_tau
+        if np.isfinite(cfg.accel_bias_tau):
+            F[IBA, IBA] = -self._I3 / cfg.accel_bias_tau
         if cfg.scale_factors:
             # corrected rate (ω̃ − b)/(1 + s): its error is −(δb + diag(ω) δs)
             F[IP, ISG] = C_bn * self._w_b[None, :]
@@ -249,7 +283,7 @@ class InsGnssFilter:
         nsub = max(1, int(np.ceil(T / self.cfg.cov_step)))
         F = self._F(self._f_n, T)
         h = T / nsub
-        Phi = np.eye(self.nx) + F * h + 0.5 * (F @ F) * h * h
+        Phi = self._I + F * h + 0.5 * (F @ F) * h * h
         Q = self._Q(h)
         for _ in range(nsub):
             self.P = Phi @ self.P @ Phi.T + Q
@@ -269,9 +303,11 @@ class InsGnssFilter:
                       h=h - dx[2], velocity_n=ins.velocity_n - dx[IV], C_nb=C_bn.T, check=False)
         self.bg -= dx[IBG]  # δb = estimated − true
         self.ba -= dx[IBA]
-        if self.nx > NX:
+        if self.cfg.scale_factors:
             self.sg -= dx[ISG]
             self.sa -= dx[ISA]
+        if self.imt is not None:
+            self.mu -= dx[self.imt]
 
     def _kalman(self, r, H, R):
         S = H @ self.P @ H.T + R
@@ -316,15 +352,34 @@ class InsGnssFilter:
         return self._kalman(r, H, R)
 
     def update_nhc(self):
-        """Non-holonomic constraint: body lateral (x) and vertical (z) velocity are zero."""
+        """Non-holonomic constraint: the vehicle's lateral and vertical velocity are zero.
+
+        At the point ``nhc_lever_b`` (rear-axle centre) and in the vehicle frame rotated from
+        the IMU's by the mounting angles μ (estimated with ``mount_states``)::
+
+            v_v = exp([μ×]) (C_nb v^n + ω_b × l),    z = (v_v,R, v_v,U) = 0
+            ∂v_v/∂δv = C_vb C_nb,  ∂v_v/∂ψ = −C_vb C_nb [v^n×],  ∂v_v/∂δμ = −[v_v×] (cols x, z)
+        """
         C_nb = self.ins.C_nb
         v = self.ins.velocity_n
-        vb = C_nb @ v
+        vv = C_nb @ v
+        C_vn = C_nb
+        lever = self.cfg.nhc_lever_b
+        if lever[0] or lever[1] or lever[2]:
+            vv = vv + _skew(self._w_b) @ lever
+        if self.imt is not None or self.mu[0] or self.mu[1]:
+            C_vb = _rot(np.array([self.mu[0], 0.0, self.mu[1]]))
+            C_vn = C_vb @ C_nb
+            vv = C_vb @ vv
         H = np.zeros((2, self.nx))
-        H[:, IV] = C_nb[[0, 2]]
-        H[:, IP] = -C_nb[[0, 2]] @ _skew(v)
-        R = np.eye(2) * self.cfg.nhc_sigma**2
-        return self._kalman(vb[[0, 2]], H, R)
+        H[:, IV] = C_vn[[0, 2]]
+        H[:, IP] = -C_vn[[0, 2]] @ _skew(v)
+        if self.imt is not None:
+            H[:, self.imt] = -_skew(vv)[[0, 2]][:, [0, 2]]
+        cfg = self.cfg
+        s_up = cfg.nhc_sigma if cfg.nhc_sigma_up is None else cfg.nhc_sigma_up
+        R = np.diag([cfg.nhc_sigma**2, s_up**2])
+        return self._kalman(vv[[0, 2]], H, R)
 
     def update_road(self, normal_n, offset, sigma, heading=None, sigma_heading=None):
         """Road constraint: the vehicle is on the road centre line (and heads along it).
@@ -394,7 +449,7 @@ InsGnssFilter.lever_arm_n = _lever_arm_n
 def _pack(flt):
     s = flt.ins
     return np.concatenate([[s.lat, s.lon, s.h], s.velocity_n, s.C_nb.reshape(9), flt.bg, flt.ba,
-                           flt.sg, flt.sa])
+                           flt.sg, flt.sa, flt.mu])
 
 
 def _unpack(t, states, Ps):
@@ -402,11 +457,14 @@ def _unpack(t, states, Ps):
     traj = Trajectory(t, states[:, 0], states[:, 1], states[:, 2], states[:, 3:6], C,
                       source="selfnav ekf")
     sig = np.sqrt(np.maximum(np.diagonal(Ps, axis1=1, axis2=2), 0.0))
-    return traj, sig, states[:, 15:18], states[:, 18:21]
+    return traj, sig, states[:, 15:18], states[:, 18:21], states[:, 27:29]
 
 
 def _apply_error(state, dx):
-    """Remove an error-state estimate from a packed nominal state."""
+    """Remove an error-state estimate from a packed nominal state.
+
+    The layout is told by the length of ``dx``: 15 (+6 scale factors) (+2 mounting angles).
+    """
     lat, lon, h = state[0], state[1], state[2]
     rm, rn = radii(lat, h)
     out = state.copy()
@@ -419,13 +477,15 @@ def _apply_error(state, dx):
     out[6:15] = att.orthonormalize(C_bn).T.reshape(9)
     out[15:18] = state[15:18] - dx[IBG]
     out[18:21] = state[18:21] - dx[IBA]
-    if len(dx) > NX:
+    if len(dx) >= 21:
         out[21:24] = state[21:24] - dx[ISG]
         out[24:27] = state[24:27] - dx[ISA]
+    if len(dx) in (NX + 2, 23):
+        out[27:29] = state[27:29] - dx[-2:]
     return out
 
 
-def _rts(states, P_plus, P_minus, Phi, updates):
+def _rts(states, P_plus, P_minus, Phi, updates, breaks=None):
     """Rauch–Tung–Striebel smoother in error-state form over the stored epochs.
 
     Epoch k holds the corrected nominal state x̃⁺_k with covariance P⁺_k; ``Phi[k]`` carries the
@@ -434,6 +494,9 @@ def _rts(states, P_plus, P_minus, Phi, updates):
     filtered error of x̃⁺_k is zero, and the smoothed one is
     ``ε_k = A_k (updates[k+1] + ε_{k+1})``, ``A_k = P⁺_k Φ_{k+1}ᵀ (P⁻_{k+1})⁻¹`` (the error of
     the propagated state at k+1 is what its update removed plus what the smoother adds).
+
+    ``breaks[k]``: epoch k's state was *replaced* (a reset to a dead-reckoning shadow,
+    :mod:`selfnav.drguard`), not updated; nothing is carried back across it.
     """
     n = len(states)
     out = states.copy()
@@ -441,6 +504,9 @@ def _rts(states, P_plus, P_minus, Phi, updates):
     nx = updates.shape[1]
     eps_next = np.zeros(nx)
     for k in range(n - 2, -1, -1):
+        if breaks is not None and breaks[k + 1]:
+            eps_next = np.zeros(nx)
+            continue
         Pm = P_minus[k + 1]
         A = np.linalg.solve(Pm.T, (P_plus[k] @ Phi[k + 1].T).T).T
         eps = A @ (updates[k + 1] + eps_next)

@@ -15,15 +15,13 @@ filter is *suspect*: it dead-reckons, uses white outliers with their own robust 
 """
 from __future__ import annotations
 
-import functools
 import heapq
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.stats import chi2
 
-from selfnav import attitude as att
-from selfnav.earth import OMEGA_EARTH, normal_gravity, radii
+from selfnav.align import _chi2_999, init_from_gnss  # noqa: F401  (re-exported)
+from selfnav.drguard import DeadReckoningGuard, track_agrees
 from selfnav.ekf import (IBG, IP, IR, IV, FilterConfig, InsGnssFilter, _enu_offset, _pack,
                          _rts, _unpack)
 from selfnav.errors import SelfnavError
@@ -47,6 +45,7 @@ class FilterResult:
     mode: np.ndarray              # per fix: 0 normal, 1 suspect
     smoothed: bool = False
     stats: dict = field(default_factory=dict)
+    mounting: np.ndarray | None = None   # (N, 2) IMU pitch, yaw to the vehicle, rad (mount_states)
 
 
 
@@ -61,151 +60,6 @@ def _still(imu_w, imu_f, C_nb, cfg):
     return (np.max(np.linalg.norm(imu_w, axis=1)) < cfg.zupt_gyro
             and np.std(np.linalg.norm(imu_f, axis=1)) < cfg.zupt_accel
             and np.hypot(f_n[0], f_n[1]) < cfg.zupt_accel_h)
-
-
-def _consistent_run(p, t, sig, cfg):
-    """True if positions ``p`` (W, 2) at times ``t`` fit bounded speed and acceleration.
-
-    Second differences ``p_{k+1} − 2p_k + p_{k−1}`` must stay below ``a_max Δt² + 3·√6 σ``:
-    white outliers of 200 m break that at once (start-up, DESIGN §7).
-    """
-    dt = np.diff(t)
-    if np.any(dt > 5.0) or np.any(dt <= 0):
-        return False
-    v = np.diff(p, axis=0) / dt[:, None]
-    if np.any(np.linalg.norm(v, axis=1) > 70.0 + 3 * np.sqrt(2) * np.max(sig) / dt.min()):
-        return False
-    acc = np.linalg.norm(np.diff(v, axis=0), axis=1)
-    return bool(np.all(acc < cfg.max_accel * dt.max() + 3 * np.sqrt(6) * np.max(sig) / dt.min()))
-
-
-def _still_before(imu, t_end, gnss=None, g=9.8, window=1.0, lookback=30.0, accel_bias=0.0):
-    """Last still second within ``lookback`` s before ``t_end``: ``(index, a_bound)`` or None.
-
-    ``a_bound`` (m/s²) is the largest constant acceleration the tests below could have missed:
-    the levelling error it allows, ``atan(a_bound/g)``, goes into the tilt σ.
-
-    Still: gyro norm below 1 °/s, |f| steady to 0.05 m/s² and within 0.1 m/s² of gravity (a
-    constant acceleration is steady too), and the GNSS fixes around it not moving. The
-    accelerometers cannot tell a gentle constant acceleration (below ~1.4 m/s²) from rest, and
-    a 10 m receiver cannot either: the tilt σ of this path assumes a good receiver or a real
-    stop.
-    """
-    n = int(round(window / imu.dt))
-    j1 = np.searchsorted(imu.t, t_end)
-    j0 = np.searchsorted(imu.t, t_end - lookback)
-    for j in range(j1 - n, j0 - 1, -max(n // 4, 1)):
-        if j < 0:
-            break
-        w = imu.omega_ib_b[j:j + n]
-        fn = np.linalg.norm(imu.f_ib_b[j:j + n], axis=1)
-        if not (np.max(np.linalg.norm(w, axis=1)) < np.radians(1.0) and np.std(fn) < 0.05
-                and abs(np.mean(fn) - g) < 0.1):
-            continue
-        # |f| = sqrt(g² + a²) ≈ g + a²/2g: an acceleration below this hides in the |f| test
-        a_bound = np.sqrt(2.0 * g * (0.1 + accel_bias))
-        if gnss is not None:
-            m = (gnss.t >= imu.t[j] - 1.0) & (gnss.t <= imu.t[min(j + n, len(imu.t) - 1)] + 1.0)
-            if m.sum() >= 2:
-                d = _enu_offset(gnss.lat[m][0], gnss.lon[m][0], 0.0, gnss.lat[m][-1],
-                                gnss.lon[m][-1], 0.0)
-                span = gnss.t[m][-1] - gnss.t[m][0]
-                sig = float(np.max(gnss.sigma_m[m])) if gnss.sigma_m is not None else 5.0
-                tol = 0.2 * span + 3.0 * np.sqrt(2) * sig
-                if np.hypot(d[0], d[1]) > tol:
-                    continue
-                a_bound = min(a_bound, 2.0 * tol / span**2)
-        return j, float(a_bound)
-    return None
-
-
-def init_from_gnss(imu, gnss: GnssData, cfg: FilterConfig, sig_h):
-    """Initial state for a vehicle: the in-motion alignment.
-
-    1. The first window of fixes that fit bounded speed and acceleration *and* a straight line
-       at constant speed (χ² of the line fit), moving fast enough that the course is known
-       (speed above ``min_init_speed`` and four times its σ). The window is long enough for a
-       velocity σ of 0.5 m/s (a 10 m σ receiver at 1 Hz needs 17 fixes; at most 20).
-       Position and velocity from the fit at its centre, heading from the course (a car moves
-       along its body y axis).
-    2. Roll and pitch: levelled in the last still second before (GNSS confirms it is still),
-       carried to the start by the gyros; the still period also gives the gyro biases (mean
-       rate less the vertical Earth rate; the horizontal Earth rate is left in their σ).
-       Without a still period: levelled from the mean specific force over the straight,
-       constant-speed window.
-    """
-    n = len(gnss.t)
-    dtf = float(np.median(np.diff(gnss.t))) if n > 1 else 1.0
-    s_med = float(np.median(sig_h))
-    W = int(np.clip(np.ceil((12.0 * s_med**2 / (0.25 * dtf**2)) ** (1.0 / 3.0)), max(cfg.window, 3), 20))
-    lat0, lon0 = gnss.lat[0], gnss.lon[0]
-    rm, rn = radii(lat0, 0.0)
-    p = np.column_stack([(gnss.lon - lon0) * rn * np.cos(lat0), (gnss.lat - lat0) * rm, gnss.h])
-    for k in range(n - W + 1):
-        sl = slice(k, k + W)
-        if cfg.robust and not _consistent_run(p[sl, :2], gnss.t[sl], sig_h[sl], cfg):
-            continue
-        # a straight-line fit gives the *mean* velocity: exact at the centre of the window for a
-        # constant acceleration, so the filter starts at the centre time
-        t0 = float(np.mean(gnss.t[sl]))
-        tt = gnss.t[sl] - t0
-        A = np.column_stack([np.ones(W), tt])
-        coef, *_ = np.linalg.lstsq(A, p[sl], rcond=None)
-        s = float(np.max(sig_h[sl]))
-        res = p[sl, :2] - A @ coef[:, :2]
-        if float(np.sum(res**2)) / s**2 > _chi2_999(2 * (W - 2)):
-            continue  # turning or accelerating: the course is not one number
-        cov = np.linalg.inv(A.T @ A) * s * s
-        v0, sv = coef[1], float(np.sqrt(cov[1, 1]))
-        if gnss.velocity_n is not None:
-            v0 = np.array([np.interp(t0, gnss.t[sl], gnss.velocity_n[sl, i]) for i in range(3)])
-            sv = cfg.gnss_vel_sigma
-        speed = float(np.hypot(v0[0], v0[1]))
-        if speed <= max(cfg.min_init_speed, 6.0 * sv):
-            continue
-        sp = float(np.sqrt(cov[0, 0]))
-        lat = lat0 + coef[0, 1] / rm
-        lon = lon0 + coef[0, 0] / (rn * np.cos(lat0))
-        hdg = np.arctan2(v0[0], v0[1])
-        out = dict(t=t0, lat=lat, lon=lon, h=coef[0, 2], velocity_n=v0)
-        still = _still_before(imu, t0, gnss, float(normal_gravity(lat, coef[0, 2])),
-                              accel_bias=cfg.accel_bias_sigma)
-        if still is not None:
-            j0, a_bound = still
-            js, je = j0, j0 + int(round(1.0 / imu.dt))
-            f_lev = imu.f_ib_b[js:je].mean(0)
-            roll0 = np.arctan2(-f_lev[0], f_lev[2])
-            pitch0 = np.arctan2(f_lev[1], np.hypot(f_lev[0], f_lev[2]))
-            C0 = att.dcm_nb_from_euler(roll0, pitch0, 0.0)
-            # gyro biases: the mean rate less the vertical Earth rate (heading unknown)
-            up_b = f_lev / np.linalg.norm(f_lev)
-            w_mean = imu.omega_ib_b[js:je].mean(0)
-            bg = w_mean - up_b * OMEGA_EARTH * np.sin(lat)
-            sbg = np.sqrt(np.var(imu.omega_ib_b[js:je], axis=0) / (je - js)
-                          + (OMEGA_EARTH * np.cos(lat)) ** 2 + cfg.gyro_bias_instability**2)
-            out["gyro_bias"], out["gyro_bias_sigma"] = bg, sbg
-            j1 = np.searchsorted(imu.t, t0)
-            from selfnav.latitude import _gyro_attitude
-            dts = np.diff(imu.t[je - 1:j1 + 1], prepend=imu.t[je - 1] - imu.dt)
-            q = _gyro_attitude(np.ascontiguousarray(imu.omega_ib_b[je - 1:j1 + 1] - bg), dts)
-            C_bn = C0.T @ att.quat_to_dcm(q[-1])
-            roll, pitch, _ = att.euler_from_dcm_bn(C_bn)
-            dur = imu.t[j1] - imu.t[je - 1]
-            s_tilt = np.radians(0.3) + np.arctan(a_bound / 9.8) + float(np.max(sbg)) * dur
-        else:
-            # straight and at constant speed: the specific force is gravity alone
-            j = np.searchsorted(imu.t, gnss.t[sl])
-            f_b = imu.f_ib_b[j[0]:j[-1] + 1].mean(0)
-            roll = np.arctan2(-f_b[0], f_b[2])
-            pitch = np.arctan2(f_b[1], np.hypot(f_b[0], f_b[2]))
-            s_tilt = np.radians(4.0)
-        s_hdg = np.arctan2(sv, speed) + np.radians(2.0)
-        out.update(C_nb=att.dcm_nb_from_euler(roll, pitch, hdg),
-                   sigmas=([2 * sp, 2 * sp, 3 * sp], [2 * sv, 2 * sv, 2 * sv + 0.2],
-                           [s_tilt, s_tilt, 2 * s_hdg]))
-        return out
-    raise SelfnavError(f"no run of {W} mutually consistent GNSS fixes on a straight line faster "
-                       f"than {cfg.min_init_speed} m/s to start from (heading needs motion)")
 
 
 class _FixStore:
@@ -263,11 +117,18 @@ class StreamingNavigator:
         self.sig_h, self.sig_v = [], []
         self.status, self.innov, self.nis, self.mode = [], [], [], []
         self.headings = []
-        self.rec = {k: [] for k in ("t", "state", "P", "Pm", "Phi", "dx")}
+        self.rec = {k: [] for k in ("t", "state", "P", "Pm", "Phi", "dx", "brk")}
+        self._reset = False        # the state was replaced at this epoch (smoother break)
+        self._widened = None       # covariance added at this epoch without a measurement
         self.suspect = False
         self.rejections = self.streak = self.degraded = self.reacq = 0
         self.sus, self.win = [], []
         self.disp = np.zeros(3)  # INS displacement by propagation only, ENU m
+        self.guard = DeadReckoningGuard(cfg) if (cfg.robust and cfg.dr_guard) else None
+        self._block = None         # the last IMU block (t, dθ, dv) for the shadows
+        self._still = False
+        self._drag = None          # shadow that rejected a fix the filter accepted
+        self._t_suspect = None
 
     # ------------------------------------------------------------------ input
     def add_gnss(self, t, lat, lon, h, sigma_h=np.nan, velocity_n=None):
@@ -366,20 +227,26 @@ class StreamingNavigator:
         self._buf_t, self._buf_w, self._buf_f, self._buf_dt = [], [], [], []
         p0 = (flt.ins.lat, flt.ins.lon, flt.ins.h)
         flt.predict(t, w * dt[:, None], f * dt[:, None])
+        self._block = (t, w * dt[:, None], f * dt[:, None])
         self.disp += _enu_offset(*p0, flt.ins.lat, flt.ins.lon, flt.ins.h)
         return w, f
 
     def _store(self, te, Pm, dx):
         if not self.record:
             self.flt.take_transition()
+            self._widened, self._reset = None, False
             return
         r = self.rec
         r["t"].append(te)
         r["state"].append(_pack(self.flt))
         r["P"].append(self.flt.P.copy())
-        r["Pm"].append(Pm)
+        # covariance added without a measurement is process noise: part of the prior
+        r["Pm"].append(Pm if self._widened is None else Pm + self._widened)
+        self._widened = None
         r["Phi"].append(self.flt.take_transition())
         r["dx"].append(dx)
+        r["brk"].append(self._reset)
+        self._reset = False
 
     def _process_next(self):
         ta = self.t0 + self.cfg.aid_step * self._n_aid
@@ -397,8 +264,13 @@ class StreamingNavigator:
         dx = np.zeros(flt.nx)
         if kind == 1:
             # still IMU *and* a slow INS: constant velocity also looks still to an IMU
-            if (cfg.zupt and np.linalg.norm(flt.ins.velocity_n) < cfg.zupt_speed
-                    and _still(w_blk - flt.bg, f_blk - flt.ba, flt.ins.C_nb, cfg)):
+            self._still = bool(cfg.zupt and np.linalg.norm(flt.ins.velocity_n) < cfg.zupt_speed
+                               and _still(w_blk - flt.bg, f_blk - flt.ba, flt.ins.C_nb, cfg))
+        if self.guard is not None and self._block is not None:
+            self.guard.predict(*self._block, self._still)
+            self._block = None
+        if kind == 1:
+            if self._still:
                 dx = flt.update_zupt()
             elif cfg.nhc:
                 dx = flt.update_nhc()
@@ -410,6 +282,9 @@ class StreamingNavigator:
             dx = flt.update_heading(*self.headings[k])
         else:
             dx = self._fix(k)
+        if self.guard is not None:
+            self.guard.maintain(te, flt, trusted=not self.suspect and self.rejections == 0,
+                                suspect=self.suspect)
         self._store(te, Pm, dx)
 
     def _fix(self, k):
@@ -425,17 +300,36 @@ class StreamingNavigator:
         # (Huber-like): real model errors are not Gaussian, outliers of 200 m are far beyond
         soft = cfg.robust and np.hypot(r[0], r[1]) <= max(cfg.soft_gate_max_m, 3.0 * sh[k])
         ok = nis <= cfg.gate * (cfg.soft_gate if soft else 1.0)
+        guard = self.guard
+        shadow_no = None if (guard is None or self.suspect) else guard.rejects(
+            fx.t[k], fx.lat[k], fx.lon[k], fx.h[k], sh[k], cfg.dr_sigma_scale)
         if cfg.robust:
             # window test: displacements between fixes against the INS displacement, which stays
             # accurate when the absolute INS position has drifted (P cannot weaken it)
             self.win = (self.win + [(k, self.disp.copy())])[-cfg.window:]
             s_vel = float(np.sqrt(np.trace(flt.P[IV, IV]) / 3.0)) + 0.2
+            if self.suspect and guard is not None:
+                # a long dead reckoning is worse than its covariance says (drguard): the tests
+                # that take GNSS back allow for it, or the filter would never re-acquire
+                s_vel *= cfg.dr_reacq_scale
             if self.suspect:
                 self.sus = [x for x in self.sus + [(fx.t[k], -r)]
                             if x[0] > fx.t[k] - cfg.degraded_window]
                 win_ok = (len(self.win) >= cfg.window
                           and _window_consistent(self.win, fx, sh, sv_, s_vel))
                 self.streak = self.streak + 1 if win_ok else 0
+                # the dead reckoning has become no better than the outliers it guards against
+                # (or the outage is longer than any outlier episode): a self-consistent run is
+                # taken back as before the guard
+                long_out = (guard is None or fx.t[k] - self._t_suspect > cfg.dr_max_suspect
+                            or flt.P[0, 0] + flt.P[1, 1] > cfg.dr_lost_sigma**2)
+                if win_ok and not long_out:
+                    # a smooth drift is self-consistent too: it must also move like the dead
+                    # reckoning and sit within its uncertainty (the gate) to be taken back
+                    run = self.sus[-(self.streak + cfg.window - 1):]
+                    win_ok = ok and track_agrees([x[0] for x in run], [x[1][:2] for x in run],
+                                                 sh[k], flt.P[3:5, 3:5] * cfg.dr_reacq_scale**2,
+                                                 cfg.dr_fit_sigma)
                 if win_ok and not ok and self.streak >= cfg.window:
                     # a long run of self-consistent fixes that the dead reckoning cannot
                     # explain: its drift exceeded P; re-acquire by widening P to the offset
@@ -456,6 +350,11 @@ class StreamingNavigator:
                             self.degraded += 1
             elif len(self.win) > 1:
                 ok = ok and _window_consistent(self.win, fx, sh, sv_, s_vel)
+            if not self.suspect and shadow_no is not None:
+                # a fix the dead reckoning cannot explain; if the filter took it, it is
+                # being dragged (drguard)
+                self._drag = shadow_no if ok else self._drag
+                ok = False
         self.mode[k] = int(self.suspect)
         if ok:
             dx = flt._kalman(r, H, R * max(1.0, nis / cfg.gate))
@@ -463,11 +362,22 @@ class StreamingNavigator:
             self.rejections = self.streak = 0
             self.suspect = False
             self.sus = []
+            self._drag = None
         else:
             self.status[k] = 0
             self.rejections += 1
-            if cfg.robust and self.rejections >= cfg.suspect_after:
+            if cfg.robust and self.rejections >= cfg.suspect_after and not self.suspect:
                 self.suspect = True
+                self._t_suspect = fx.t[k]
+                if guard is not None:
+                    # dragged before the rejections began? back to the shadow it left
+                    drag = self._drag or guard.dragged(fx.t[k], flt, cfg.dr_sigma_scale)
+                    if drag is not None and guard.reset_to(drag, flt):
+                        self.win = []
+                        self._reset = True
+                    else:
+                        self._widened = guard.widen(fx.t[k], flt)
+                    self._drag = None
         if ok and cfg.use_gnss_velocity and fx.vel[k] is not None:
             dx = dx + flt.update_velocity(fx.vel[k], cfg.gnss_vel_sigma)
         return dx
@@ -482,19 +392,21 @@ class StreamingNavigator:
         smoothed = False
         if smooth and len(t) > 2:
             states, Ps = _rts(states, Ps, np.asarray(r["Pm"]), np.asarray(r["Phi"]),
-                              np.asarray(r["dx"]))
+                              np.asarray(r["dx"]), np.asarray(r["brk"], bool))
             smoothed = True
         # several epochs can share a time (a fix and an aiding epoch): keep the last state
         last = np.r_[t[1:] != t[:-1], True] if len(t) else np.zeros(0, bool)
         t, states, Ps = t[last], states[last], Ps[last]
-        traj, sig, bg, ba = _unpack(t, states, Ps)
+        traj, sig, bg, ba, mount = _unpack(t, states, Ps)
         st = np.asarray(self.status, int)
         stats = {"fixes": len(st), "accepted": int(np.sum(st == 1)),
                  "rejected": int(np.sum(st == 0)), "before_init": int(np.sum(st == -1)),
-                 "reacquisitions": self.reacq, "degraded_updates": self.degraded}
+                 "reacquisitions": self.reacq, "degraded_updates": self.degraded,
+                 "shadow_resets": 0 if self.guard is None else self.guard.alarms}
         return FilterResult(traj, sig[:, IR], sig[:, IV], sig[:, IP], bg, ba,
                             np.asarray(self.fixes.t), st, np.asarray(self.innov).reshape(-1, 3),
-                            np.asarray(self.nis), np.asarray(self.mode, int), smoothed, stats)
+                            np.asarray(self.nis), np.asarray(self.mode, int), smoothed, stats,
+                            mount if self.cfg.mount_states else None)
 
 
 def run_filter(imu, gnss: GnssData, cfg: FilterConfig | None = None, *, init=None,
@@ -590,11 +502,3 @@ def _window_consistent(buf, gnss, sig_h, sig_v, sv):
     mean = np.sum(d * w, axis=0) / np.sum(w, axis=0)
     chi2 = float(np.sum((d - mean) ** 2 * w))
     return chi2 <= _chi2_999(3 * (len(buf) - 1))
-
-
-@functools.lru_cache(maxsize=64)
-def _chi2_999(dof):
-    """0.999 quantile of χ²(dof)."""
-    return float(chi2.ppf(0.999, dof))
-
-

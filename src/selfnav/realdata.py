@@ -20,6 +20,7 @@ from selfnav import ekf
 from selfnav.earth import radii
 from selfnav.io.gnss import GnssData, read_rtklib_pos
 from selfnav.io.rtklibexplorer import read_rtklibexplorer_imu
+from selfnav.sensors import drift_errors
 
 #: IMU time offset that best aligns this log with the RTK solution (innovation RMS scan
 #: −0.45…+0.1 s; upstream uses −0.125 s): see docs/ekf.md.
@@ -48,7 +49,12 @@ def with_outages(g: GnssData, every=120.0, length=30.0, first=90.0):
 
 
 def with_outliers(g: GnssData, start, duration=180.0, sigma=200.0, kind="white", tau=60.0, seed=0):
-    """Add unflagged horizontal outliers in ``[start, start + duration)``; σ in the file unchanged."""
+    """Add unflagged horizontal outliers in ``[start, start + duration)``; σ in the file unchanged.
+
+    ``kind``: ``"white"``; ``"gm"`` first-order Gauss–Markov (correlated, but rough: 18 m steps
+    between 4 Hz fixes); ``"drift"`` / ``"drift-jump"``: a smooth drift (:func:`drift_errors`)
+    from zero / from its steady state.
+    """
     rng = np.random.default_rng(seed)
     out = g.select(np.ones(len(g.t), bool))
     out.lat, out.lon = g.lat.copy(), g.lon.copy()
@@ -56,6 +62,9 @@ def with_outliers(g: GnssData, start, duration=180.0, sigma=200.0, kind="white",
     k = int(m.sum())
     if kind == "white":
         e = rng.normal(size=(k, 2)) * sigma
+    elif kind in ("drift", "drift-jump"):
+        dt = float(np.median(np.diff(g.t)))
+        e = drift_errors(k, dt, sigma, tau, rng, start="zero" if kind == "drift" else "stationary")
     else:
         dt = float(np.median(np.diff(g.t)))
         a = np.exp(-dt / tau)
@@ -67,9 +76,23 @@ def with_outliers(g: GnssData, start, duration=180.0, sigma=200.0, kind="white",
     return out
 
 
-def drive0708(folder, *, scenarios=("all", "outages", "white", "gm"), smooth=(False, True),
-              grade="consumer-car", outlier_start=200.0) -> dict:
-    """Run the drive_0708 experiments; returns ``{scenario: {variant: metrics}}``."""
+def drive0708(folder, *, scenarios=("all", "outages", "white", "gm", "drift", "outage3"),
+              smooth=(False, True), grade="consumer-car", outlier_start=200.0, seed=0,
+              **cfg_kw) -> dict:
+    """Run the drive_0708 experiments; returns ``{scenario: {variant: metrics}}``.
+
+    Variants: ``filter`` (real time), ``smoothed`` (RTS), and for outlier scenarios
+    ``filter, no shadows`` (window test, no shadow dead reckoning: :mod:`selfnav.drguard`) and
+    ``filter, no window test`` (the plain χ² gate).
+
+    Scenarios: ``all`` fixes; ``outages`` (30 s every 120 s); 3-minute windows of 200 m σ
+    outliers from ``outlier_start`` s: ``white``, ``gm`` (first-order Gauss–Markov, rough),
+    ``drift`` (smooth second-order Gauss–Markov from zero, :func:`selfnav.sensors.drift_errors`);
+    ``outage3``: the same 3 minutes with no fixes at all — the dead-reckoning bound that no
+    real-time filter beats when the outliers carry no information (drifting ones do not).
+    Outlier scenarios also run the filter without the window test and the shadow dead
+    reckoning (``robust=False``: the plain χ² gate).
+    """
     folder = Path(folder)
     imu = read_rtklibexplorer_imu(folder / "imu_1934.csv", t_offset=DRIVE0708_T_OFFSET)
     truth = read_rtklib_pos(folder / "gnss_1934_sf.pos")
@@ -80,22 +103,27 @@ def drive0708(folder, *, scenarios=("all", "outages", "white", "gm"), smooth=(Fa
             g = truth
         elif sc == "outages":
             g, ends = with_outages(truth)
-        elif sc in ("white", "gm"):
+        elif sc in ("white", "gm", "drift", "drift-jump"):
             win = (truth.t[0] + outlier_start, truth.t[0] + outlier_start + 180.0)
-            g = with_outliers(truth, win[0], kind=sc)
+            g = with_outliers(truth, win[0], kind=sc, seed=seed)
+        elif sc == "outage3":
+            win = (truth.t[0] + outlier_start, truth.t[0] + outlier_start + 180.0)
+            g = truth.select(~((truth.t >= win[0]) & (truth.t < win[1])))
         else:
             raise ValueError(sc)
-        variants = [(True, s) for s in smooth]
-        if win is not None:
-            variants.append((False, False))
+        # (name, robust, shadows, smooth)
+        variants = [("smoothed" if s else "filter", True, True, s) for s in smooth]
+        if win is not None and sc != "outage3":
+            variants += [("filter, no shadows", True, False, False),
+                         ("filter, no window test", False, False, False)]
         res_sc = {}
-        for robust, sm in variants:
-            cfg = ekf.FilterConfig.for_grade(grade, lever_arm_b=DRIVE0708_LEVER_ARM_B, robust=robust)
+        for name, robust, guard, sm in variants:
+            kw = dict(dict(robust=robust, dr_guard=guard), **cfg_kw)
+            cfg = ekf.FilterConfig.for_grade(grade, lever_arm_b=DRIVE0708_LEVER_ARM_B, **kw)
             t0 = time.perf_counter()
             res = ekf.run_filter(imu, g, cfg, smooth=sm)
             el = time.perf_counter() - t0
             t, e = horizontal_error(res.trajectory, truth)
-            name = ("smoothed" if sm else "filter") + ("" if robust else ", no window test")
             m = {"rms_m": float(np.sqrt(np.mean(e**2))), "max_m": float(e.max()),
                  "seconds": el, "accepted": res.stats["accepted"], "rejected": res.stats["rejected"]}
             if ends:
@@ -113,7 +141,37 @@ def drive0708(folder, *, scenarios=("all", "outages", "white", "gm"), smooth=(Fa
     return out
 
 
+def placement_scan(folder, kinds=("white", "gm", "drift", "outage3"),
+                   starts=(100, 150, 200, 250, 300, 350), seeds=(0, 1, 2), **cfg_kw) -> dict:
+    """The 3-minute outlier window at six places in the drive and three outlier draws.
+
+    One placement is one sample of the dead reckoning's luck (its error depends on what the car
+    does in those 3 minutes: straight at 16 m/s or turning in the parking lot); this gives the
+    spread. Returns ``{kind: (N, 3) array of window RMS, window max, outside RMS}``.
+    """
+    out = {}
+    for kind in kinds:
+        rows = []
+        for st in starts:
+            for sd in (seeds if kind in ("white", "drift", "drift-jump") else seeds[:1]):
+                r = drive0708(folder, scenarios=(kind,), smooth=(False,), outlier_start=st, seed=sd,
+                              **cfg_kw)[kind]["filter"]
+                rows.append((r["window_rms_m"], r["window_max_m"], r["outside_rms_m"]))
+        out[kind] = np.array(rows)
+    return out
+
+
 def _main(argv):
+    if "--scan" in argv:
+        argv = [a for a in argv if a != "--scan"]
+        folder = argv[1] if len(argv) > 1 else str(Path(__file__).resolve().parents[3] / "shared" / "data" / "rtklibexplorer_drive_0708")
+        for kind, r in placement_scan(folder).items():
+            print(f"{kind:8s} {len(r)} runs: window RMS median {np.median(r[:, 0]):.1f} m "
+                  f"(max {r[:, 0].max():.1f}), window max median {np.median(r[:, 1]):.1f} m "
+                  f"(max {r[:, 1].max():.1f}; ≤ 40 m in {int(np.sum(r[:, 1] <= 40))}), outside RMS "
+                  f"median {np.median(r[:, 2]):.2f} m (> 1 m in {int(np.sum(r[:, 2] > 1))}, "
+                  f"> 10 m in {int(np.sum(r[:, 2] > 10))})")
+        return
     folder = argv[1] if len(argv) > 1 else str(Path(__file__).resolve().parents[3] / "shared" / "data" / "rtklibexplorer_drive_0708")
     r = drive0708(folder)
     for sc, d in r.items():

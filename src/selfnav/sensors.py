@@ -371,7 +371,10 @@ def mean_heading(heading, k: int):
 class OutlierWindow:
     """An unflagged GNSS outlier episode (seed 004: up to 5 min at 200 m σ).
 
-    kind : "white" (independent per fix) or "gm" (slowly drifting first-order Gauss-Markov)
+    kind : "white" (independent per fix), "gm" (first-order Gauss-Markov: correlated but rough,
+        ~18 m steps between 4 Hz fixes at 200 m, 60 s), "drift" (smooth second-order
+        Gauss-Markov from zero: a receiver or a spoofer sliding away, :func:`drift_errors`) or
+        "drift-jump" (the same from its steady state: a jump, then the drift)
     """
 
     start: float
@@ -383,6 +386,29 @@ class OutlierWindow:
     @property
     def end(self) -> float:
         return self.start + self.duration
+
+
+def drift_errors(n, dt, sigma, tau, rng, *, start="zero"):
+    """A smoothly drifting 2-D error: second-order Gauss–Markov, critically damped.
+
+    ``ë = −2β ė − β² e + w`` with β = 1/τ and the white-noise density set for a steady-state σ
+    (``q = 4β³σ²``, Gelb Table 3.1-1); its rate has σ·β (3.3 m/s for 200 m and 60 s).
+    ``start="zero"`` begins at no error and no rate; ``"stationary"`` draws both from the
+    steady state.
+    """
+    rng = np.random.default_rng(rng)
+    b = 1.0 / tau
+    q = 4.0 * b**3 * sigma**2
+    e = np.zeros((n, 2))
+    v = np.zeros(2)
+    if start == "stationary":
+        e[0] = rng.normal(size=2) * sigma
+        v = rng.normal(size=2) * sigma * b
+    w = rng.normal(size=(n, 2)) * np.sqrt(q * dt)
+    for k in range(1, n):
+        v = v + (-2.0 * b * v - b * b * e[k - 1]) * dt + w[k]
+        e[k] = e[k - 1] + v * dt
+    return e
 
 
 def random_outlier_windows(t0, t1, count, rng, *, max_duration=300.0, sigma=200.0,
@@ -485,8 +511,12 @@ class GnssModel:
                 e = lfilter([1.0], [1.0, -a], z, axis=0, zi=(a * w.sigma * rng.normal(size=2))[None])[0]
             elif w.kind == "white":
                 e = rng.normal(size=(k, 2)) * w.sigma
+            elif w.kind in ("drift", "drift-jump"):
+                e = drift_errors(k, dt, w.sigma, w.tau, rng,
+                                 start="zero" if w.kind == "drift" else "stationary")
             else:
-                raise SelfnavError(f"unknown outlier kind '{w.kind}' (white or gm)")
+                raise SelfnavError(f"unknown outlier kind '{w.kind}' (white, gm, drift or "
+                                   "drift-jump)")
             err[m, :2] = e
         spike = rng.uniform(size=n) < self.spike_rate
         err[spike, :2] += rng.normal(size=(int(spike.sum()), 2)) * self.spike_sigma

@@ -109,6 +109,12 @@ def register(app: typer.Typer) -> None:
         no_window_test: bool = typer.Option(False, help="Only the χ² gate (for comparison)."),
         no_nhc: bool = typer.Option(False, help="No non-holonomic constraint (not a car)."),
         scale_factors: bool = typer.Option(False, help="Estimate scale factors (21 states)."),
+        mount_states: bool = typer.Option(False, help="Estimate the IMU's pitch and yaw to the "
+                                          "vehicle (2 states, seen by the NHC)."),
+        nhc_lever: str = typer.Option("0,0,0", help="IMU to the rear-axle centre (where the NHC "
+                                      "holds), body RFU, m: x,y,z."),
+        no_shadows: bool = typer.Option(False, help="No shadow dead reckoning (drifting-outlier "
+                                        "guard), for comparison."),
         matcher: str = typer.Option("seed", help="--method seed identification: seed "
                                     "(residual minimisation, seed 004 §3) or mht (road particles)."),
         ins_datum: str = typer.Option("sk42", help="--method seed: datum of the fast loop."),
@@ -143,7 +149,9 @@ def register(app: typer.Typer) -> None:
                                f"({data.t[0]:.3f}…{data.t[-1]:.3f} s) do not overlap: different "
                                "time bases (GPS seconds of week vs seconds of day?)")
         cfg = ekf.FilterConfig.for_grade(grade, lever_arm_b=_vec3(lever_arm, "--lever-arm"),
-                                         robust=not no_window_test, nhc=not no_nhc)
+                                         robust=not no_window_test, nhc=not no_nhc,
+                                         nhc_lever_b=_vec3(nhc_lever, "--nhc-lever"),
+                                         mount_states=mount_states, dr_guard=not no_shadows)
         if scale_factors:
             cfg.scale_factors = True
         t0 = time.perf_counter()
@@ -183,6 +191,9 @@ def register(app: typer.Typer) -> None:
                    "imu_samples": len(data), "duration_s": span, "seconds": elapsed,
                    "real_time_factor": span / max(elapsed, 1e-9), **res.stats,
                    "suspect_fixes": int(np.sum(res.mode == 1)), "out": str(out)}
+        mounting = getattr(res, "mounting", None)
+        if mounting is not None and len(mounting):
+            summary["mounting_deg"] = [float(x) for x in np.degrees(mounting[-1])]
         if as_json:
             emit_json(summary)
             return
@@ -195,3 +206,9 @@ def register(app: typer.Typer) -> None:
         print(f"  GNSS fixes: {res.stats['accepted']} accepted, {res.stats['rejected']} rejected, "
               f"{res.stats['before_init']} before initialisation, "
               f"{res.stats['degraded_updates']} used with inflated σ while suspect")
+        if res.stats.get("shadow_resets"):
+            print(f"  drifting GNSS caught: {res.stats['shadow_resets']} reset(s) to the shadow "
+                  "dead reckoning")
+        if "mounting_deg" in summary:
+            print(f"  IMU mounting to the vehicle: pitch {summary['mounting_deg'][0]:.2f}°, "
+                  f"yaw {summary['mounting_deg'][1]:.2f}°")

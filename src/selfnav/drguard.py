@@ -1,0 +1,219 @@
+"""Dead-reckoning hypotheses kept alongside the INS/GNSS filter (issue 4, DESIGN §7).
+
+The filter's own tests (χ² gate, window test) compare each fix with an INS that those same fixes
+keep correcting. An error that *drifts smoothly* — a receiver that slides away over tens of
+seconds, a spoofer dragging the solution off — passes both: every fix is a little off, the filter
+follows, its velocity follows, and the displacement between fixes agrees with the (dragged)
+INS. Measured on drive_0708 before this module: a 200 m σ second-order Gauss–Markov drift
+(τ 60 s) for 3 minutes pulled the filter 150–400 m off and left it lost afterwards.
+
+The defence is a solution the fixes cannot touch: *shadows*, copies of the filter branched every
+``dr_branch`` seconds while GNSS is trusted, then carried by the IMU with the vehicle constraints
+(NHC, ZUPT) only. A shadow's covariance grows honestly with its age, so it tells how far the
+truth can be from it. Each fix is tested against every shadow older than ``dr_min_age``:
+
+    ν = z − h(x_shadow),   ν^T (H P_shadow H^T + R)^{-1} ν  ≤  χ²₂(0.9999)     (horizontal)
+
+A fix that an older shadow rejects while the filter accepted it means the filter is being
+dragged: the filter is reset to the oldest shadow that rejects (younger shadows, branched from
+the dragged filter, are dropped) and goes into suspect mode (dead reckoning). While suspect no
+shadow is branched; the oldest is kept as the reference for re-acquisition: a run of fixes is
+taken back only when its offset from the dead reckoning is within the dead reckoning's own
+uncertainty *and* its velocity (a line fit over ``dr_vel_window`` s) agrees with the dead
+reckoning velocity — a smooth drift is self-consistent, but it moves at its own speed.
+
+The shadows are cheaper than the filter: they are propagated and constrained once per
+``dr_step`` (the NHC then weighs as much per second as the filter's five-per-second updates
+with correlated errors would).
+"""
+from __future__ import annotations
+
+import copy
+import dataclasses
+
+import numpy as np
+
+from selfnav.ekf import IR, IV, _enu_offset
+
+CHI2_2_9999 = 18.421
+
+
+def clone_filter(flt):
+    """An independent copy of an :class:`~selfnav.ekf.InsGnssFilter` (state, P, biases)."""
+    out = copy.copy(flt)
+    out.ins = copy.deepcopy(flt.ins)
+    for name in ("P", "bg", "ba", "sg", "sa", "mu", "_f_n", "_w_b", "_f_b"):
+        setattr(out, name, np.array(getattr(flt, name), dtype=float, copy=True))
+    out._Phi_acc = np.eye(flt.nx)
+    return out
+
+
+class DeadReckoningGuard:
+    """Shadow dead-reckoning filters and the drift test (see the module docstring).
+
+    Parameters
+    ----------
+    cfg : FilterConfig
+        Uses ``dr_branch`` (s between shadows), ``dr_max_age`` (s a shadow lives while GNSS is
+        trusted), ``dr_min_age`` (s before a shadow tests fixes), ``dr_step`` (s between shadow
+        updates) and ``dr_gate`` (χ², 2 dof).
+    """
+
+    def __init__(self, cfg):
+        self.cfg = cfg
+        self.shadows = []          # [t_branch, filter], oldest first
+        self._buf = []             # IMU blocks since the last shadow step
+        self._t_step = -np.inf
+        self.alarms = 0
+
+    # ------------------------------------------------------------------ life cycle
+    def maintain(self, t, flt, trusted: bool, suspect: bool):
+        """Branch a shadow from ``flt`` every ``dr_branch`` s while trusted and retire those
+        older than ``dr_max_age``. In suspect mode nothing is branched nor retired: the old
+        shadows are the clean references a drift that comes and goes must be judged against."""
+        cfg = self.cfg
+        if suspect:
+            return
+        # a shadow of an unconverged filter (just after the in-motion alignment) would
+        # dead-reckon worse than its covariance says: branch only once the attitude is known
+        converged = float(np.max(np.diag(flt.P)[6:9])) < cfg.dr_att_sigma**2
+        if trusted and converged:
+            if not self.shadows or t - self.shadows[-1][0] >= cfg.dr_branch - 1e-9:
+                self._flush()
+                sh = clone_filter(flt)
+                # one covariance step per shadow step: a dead-reckoning σ needs no finer grid
+                sh.cfg = dataclasses.replace(flt.cfg, cov_step=max(cfg.cov_step, cfg.dr_step))
+                self.shadows.append([t, sh])
+            while len(self.shadows) > 1 and t - self.shadows[0][0] > cfg.dr_max_age:
+                self.shadows.pop(0)
+
+    def predict(self, t, dtheta, dv, still_blocks):
+        """Store an IMU block; the shadows are moved once per ``dr_step``."""
+        if not self.shadows:
+            return
+        self._buf.append((t, dtheta, dv, still_blocks))
+        if t[-1] - self._t_step >= self.cfg.dr_step - 1e-9:
+            self._flush()
+
+    def _flush(self):
+        if not self._buf:
+            return
+        t = np.concatenate([b[0] for b in self._buf])
+        dth = np.concatenate([b[1] for b in self._buf])
+        dv = np.concatenate([b[2] for b in self._buf])
+        still = all(b[3] for b in self._buf)
+        self._buf = []
+        self._t_step = float(t[-1])
+        for _, sh in self.shadows:
+            if sh.ins.t >= t[-1]:
+                continue
+            k = t > sh.ins.t
+            sh.predict(t[k], dth[k], dv[k])
+            if still and self.cfg.zupt:
+                sh.update_zupt()
+            elif self.cfg.nhc:
+                sh.update_nhc()
+            sh.take_transition()
+
+    # ------------------------------------------------------------------ tests
+    def _mature(self, t):
+        return [(i, sh) for i, (tb, sh) in enumerate(self.shadows)
+                if t - tb >= self.cfg.dr_min_age]
+
+    def rejects(self, t, lat, lon, h, sigma_h, scale=1.0):
+        """The oldest mature shadow (its entry) that rejects the fix (horizontal χ²), or None.
+
+        ``scale`` inflates the shadows' σ: the drag test uses ``dr_sigma_scale`` (an EKF's
+        dead-reckoning covariance is optimistic after the alignment, and a false alarm costs a
+        reset), the re-acquisition test 1 (a drift must not be taken back).
+        """
+        self._flush()
+        for i, sh in self._mature(t):
+            r, H = sh.position_residual(lat, lon, h)
+            S = (H @ sh.P @ H.T)[:2, :2] * scale**2 + np.eye(2) * sigma_h**2
+            if float(r[:2] @ np.linalg.solve(S, r[:2])) > self.cfg.dr_gate:
+                return self.shadows[i]
+        return None
+
+    def dragged(self, t, flt, scale=1.0):
+        """The oldest mature shadow from which ``flt`` has moved farther than the two
+        covariances allow, in horizontal position or velocity (χ², ``scale`` on the shadow's
+        σ), or None. The velocity is the sharper test: a drift followed for a few seconds
+        bends the velocity by its rate (σ 3 m/s at 200 m, 60 s) against a shadow's 0.1–1 m/s."""
+        self._flush()
+        for _, sh in self._mature(t):
+            d = _enu_offset(sh.ins.lat, sh.ins.lon, sh.ins.h, flt.ins.lat, flt.ins.lon, flt.ins.h)
+            dv = flt.ins.velocity_n - sh.ins.velocity_n
+            for r, idx in ((d[:2], slice(0, 2)), (dv[:2], slice(3, 5))):
+                S = sh.P[idx, idx] * scale**2 + flt.P[idx, idx]
+                if float(r @ np.linalg.solve(S, r)) > self.cfg.dr_gate:
+                    return next(e for e in self.shadows if e[1] is sh)
+        return None
+
+    def widen(self, t, flt):
+        """Cover a drag that began before any test saw it: on entering suspect mode, add the
+        squared position and velocity differences to the youngest mature shadow to ``flt.P``.
+
+        A smooth drift is followed for a few seconds before a fix is rejected; the velocity the
+        filter then carries into the dead reckoning is off by up to the drift's rate, which its
+        covariance does not know — and an optimistic covariance never re-acquires."""
+        self._flush()
+        mature = self._mature(t)
+        if not mature:
+            return None
+        sh = mature[-1][1]
+        d = _enu_offset(sh.ins.lat, sh.ins.lon, sh.ins.h, flt.ins.lat, flt.ins.lon, flt.ins.h)
+        dv = flt.ins.velocity_n - sh.ins.velocity_n
+        add = np.zeros_like(flt.P)
+        add[IR, IR] = np.diag(d * d)
+        add[IV, IV] = np.diag(dv * dv)
+        flt.P += add
+        return add
+
+    def reset_to(self, entry, flt):
+        """Put a shadow's state into ``flt``; drop the younger (dragged) shadows.
+
+        Returns False when the shadow has meanwhile been retired."""
+        i = next((j for j, e in enumerate(self.shadows) if e is entry), None)
+        if i is None:
+            return False
+        self._flush()
+        sh = entry[1]
+        flt.ins.set_state(lat=sh.ins.lat, lon=sh.ins.lon, h=sh.ins.h,
+                          velocity_n=sh.ins.velocity_n, C_nb=sh.ins.C_nb, check=False)
+        flt.ins.t = sh.ins.t
+        flt.P = sh.P.copy()
+        for name in ("bg", "ba", "sg", "sa", "mu"):
+            setattr(flt, name, getattr(sh, name).copy())
+        del self.shadows[i + 1:]
+        self.alarms += 1
+        return True
+
+
+def track_agrees(t, innov_xy, sig, P_vv, max_fit_sigma=0.5, gate=CHI2_2_9999):
+    """Do the fixes move like the dead reckoning? (re-acquisition test)
+
+    ``innov_xy`` are fix − dead-reckoning offsets (ENU m) at times ``t`` over a run of mutually
+    consistent fixes. For healthy fixes the offset is the dead reckoning's own error, which
+    changes at its velocity error (covariance ``P_vv``, 2×2); a drifting receiver error moves
+    at its own speed. The slope of a line fit must agree with zero within ``P_vv`` plus the
+    fit's variance (χ², 2 dof), and the run must be long enough for a slope σ below
+    ``max_fit_sigma`` (m/s) — shorter runs cannot tell a drift from a healthy receiver.
+    """
+    t = np.asarray(t, float)
+    d = np.asarray(innov_xy, float)
+    if len(t) < 4:
+        return False
+    tt = t - t.mean()
+    A = np.column_stack([np.ones(len(t)), tt])
+    coef, *_ = np.linalg.lstsq(A, d, rcond=None)
+    res = d - A @ coef
+    s2 = max(float(np.max(sig)) ** 2, float(np.mean(res * res)))
+    var_fit = s2 / float(tt @ tt)
+    if var_fit > max_fit_sigma**2:
+        return False
+    S = P_vv + np.eye(2) * var_fit
+    return float(coef[1] @ np.linalg.solve(S, coef[1])) <= gate
+
+
+__all__ = ["DeadReckoningGuard", "clone_filter", "track_agrees", "IR", "IV"]
