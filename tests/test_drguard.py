@@ -9,7 +9,7 @@ from selfnav.io.imu import ImuData
 from selfnav.roads import packaged_map, read_roads
 from selfnav.sensors import OutlierWindow, drift_errors
 
-from test_ekf import _drive, _errors
+from test_ekf import _drive, _errors, _window_metrics
 
 
 @pytest.fixture(scope="module")
@@ -67,12 +67,7 @@ def test_smooth_drift_is_caught_by_the_shadow_dead_reckoning(graph):
         out = {}
         for guard in (True, False):
             cfg = ekf.FilterConfig.for_grade("consumer", scale_factors=False, dr_guard=guard)
-            res = ekf.run_filter(imu, g, cfg)
-            t, dp, *_ = _errors(res, truth)
-            e = np.hypot(dp[:, 0], dp[:, 1])
-            w = (t >= win.start) & (t < win.end)
-            rest = ~w & (t > t[0] + 60.0)
-            out[guard] = (np.sqrt(np.mean(e[w] ** 2)), e[w].max(), np.sqrt(np.mean(e[rest] ** 2)))
+            out[guard] = _window_metrics(ekf.run_filter(imu, g, cfg), truth, win)
         assert out[True][0] < 18.0 and out[True][1] < 40.0 and out[True][2] < 5.0, (kind, out)
         assert out[False][0] > 5 * out[True][0], (kind, out)
 
