@@ -14,7 +14,7 @@ import time
 from selfnav import ekf
 from selfnav.io.gnss import GnssData
 from selfnav.mapmatch import match_gnss
-from selfnav.roadnav import EkfRoadAid
+from selfnav.roadaid import EkfRoadAid
 from selfnav.roads import read_roads
 from selfnav.seedloop import SeedConfig, run_seed
 from selfnav.simulate.scenarios import simulate

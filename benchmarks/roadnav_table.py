@@ -10,7 +10,9 @@ span (matched over the whole record, then cut); "on road" is the share of epochs
 within 5 m of the centre line actually driven, "wrong run" the longest run of epochs farther
 than that (s); "× RT" is processing speed against real time.
 
-Run: ``python benchmarks/roadnav_table.py [--duration 600] [--seeds 1 2 3] [--no-outliers]``
+Run: ``python benchmarks/roadnav_table.py [--duration 600] [--seeds 1 2 3] [--no-outliers]
+[--breakdown]`` (``--breakdown``: the EKF + map errors by part of the drive — start-up, turns,
+outlier windows, the rest — pooled over all epochs).
 """
 from __future__ import annotations
 
@@ -23,7 +25,7 @@ from selfnav import ekf, sensors
 from selfnav.evaluate import evaluate
 from selfnav.io.gnss import GnssData
 from selfnav.mapmatch import match_gnss
-from selfnav.roadnav import EkfRoadAid
+from selfnav.roadaid import EkfRoadAid
 from selfnav.roads import project_to_polyline, read_roads
 from selfnav.seedloop import SeedConfig, robust_init, run_seed
 from selfnav.simulate.scenarios import simulate
@@ -69,7 +71,25 @@ def metrics(sim, graph, traj, seconds, t_min=None):
     return {"along_rms": m["along_track_rms_m"], "along_max": m["along_track_max_m"],
             "cross_rms": m["cross_track_rms_m"], "cross_max": m["cross_track_max_m"],
             "on_road": share, "wrong_s": wrong, "start_s": float(ev.t[0]),
-            "rt": span / max(seconds, 1e-9)}
+            "rt": span / max(seconds, 1e-9), "ev": ev}
+
+
+def breakdown(sim, wins, ev):
+    """Per epoch: which part of the drive (for ``--breakdown``): the first 30 s after the
+    start, within 3 s of a turn of more than 30° (truth heading over ±3 s), inside an outlier
+    window, the rest."""
+    t = ev.t
+    v = sim.truth.velocity_n
+    hdg = np.unwrap(np.arctan2(v[:, 0], v[:, 1]))
+    turn = np.abs(np.interp(t + 3, sim.truth.t, hdg) - np.interp(t - 3, sim.truth.t, hdg))
+    inwin = np.zeros(len(t), bool)
+    for w in wins:
+        inwin |= (t >= w.start) & (t < w.start + w.duration)
+    part = np.full(len(t), "rest", dtype=object)
+    part[inwin] = "outlier window"
+    part[turn > np.radians(30.0)] = "turn > 30° ± 3 s"
+    part[t - t[0] < 30.0] = "first 30 s"
+    return part
 
 
 def run_one(map_name, duration, seed, outliers=True):
@@ -78,7 +98,7 @@ def run_one(map_name, duration, seed, outliers=True):
     graph = read_roads(sim.map_path)
     g = sim.gnss
     gd = GnssData(g.t, g.lat, g.lon, g.h, g.sigma_m, None, None, "simulated")
-    rows = {}
+    rows = {"windows": wins, "sim": sim}
     for name, matcher in (("seed loop", "seed"), ("seed loop + mht", "mht")):
         t0 = time.perf_counter()
         r = run_seed(sim.imu, gd, graph, SeedConfig(matcher=matcher))
@@ -106,17 +126,43 @@ def run_one(map_name, duration, seed, outliers=True):
     return rows, wins
 
 
+def print_breakdown(runs):
+    """EKF + map: where the error comes from (pooled over the runs' epochs)."""
+    parts, al, cr = [], [], []
+    for rows in runs:
+        ev = rows["EKF + map"]["ev"]
+        parts.append(breakdown(rows["sim"], rows["windows"], ev))
+        al.append(ev.along)
+        cr.append(ev.cross)
+    parts, al, cr = np.concatenate(parts), np.concatenate(al), np.concatenate(cr)
+    sa, sc = np.sum(al**2), np.sum(cr**2)
+    print("\nEKF + map, pooled over all epochs: where the error comes from\n")
+    print("| part of the drive | epochs | along RMS m | share of along MSE | cross RMS m | "
+          "share of cross MSE |")
+    print("| --- | --- | --- | --- | --- | --- |")
+    for k in ("first 30 s", "turn > 30° ± 3 s", "outlier window", "rest"):
+        m = parts == k
+        print(f"| {k} | {100 * m.mean():.0f} % | {np.sqrt(np.mean(al[m]**2)):.1f} | "
+              f"{100 * np.sum(al[m]**2) / sa:.0f} % | {np.sqrt(np.mean(cr[m]**2)):.2f} | "
+              f"{100 * np.sum(cr[m]**2) / sc:.0f} % |")
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--duration", type=float, default=600.0)
     ap.add_argument("--seeds", type=int, nargs="+", default=[1, 2])
     ap.add_argument("--maps", nargs="+", default=["kotka_karhula", "helsinki_centre"])
     ap.add_argument("--no-outliers", action="store_true", help="nominal GNSS only")
+    ap.add_argument("--breakdown", action="store_true",
+                    help="also break the EKF + map errors down by part of the drive")
     a = ap.parse_args()
     allrows = {}
+    runs = []
     for m in a.maps:
         for s in a.seeds:
             rows, wins = run_one(m, a.duration, s, not a.no_outliers)
+            runs.append(rows)
+            rows = {k: v for k, v in rows.items() if k not in ("windows", "sim")}
             w = ", ".join(f"{x.start:.0f}+{x.duration:.0f}s {x.kind}" for x in wins)
             print(f"# {m} seed {s}: outlier windows {w}", flush=True)
             for k, v in rows.items():
@@ -137,6 +183,8 @@ def main():
         print(f"| {k} | {f('along_rms'):.1f} | {g('along_max'):.0f} | {f('cross_rms'):.1f} | "
               f"{g('cross_max'):.0f} | {100 * np.mean([v['on_road'] for v in vs]):.1f} % | "
               f"{g('wrong_s'):.0f} | {np.mean([v['start_s'] for v in vs]):.0f} | {rts} |")
+    if a.breakdown:
+        print_breakdown(runs)
 
 
 if __name__ == "__main__":

@@ -47,7 +47,7 @@ def navigation_demo(duration: float = 420.0, seeds=(1, 2, 3)) -> dict:
     from selfnav import ekf
     from selfnav.evaluate import evaluate
     from selfnav.io.gnss import GnssData
-    from selfnav.roadnav import EkfRoadAid
+    from selfnav.roadaid import EkfRoadAid
     from selfnav.roads import read_roads
     from selfnav.seedloop import robust_init
     from selfnav.simulate.scenarios import simulate

@@ -120,6 +120,10 @@ class DeadReckoningGuard:
         return [(i, sh) for i, (tb, sh) in enumerate(self.shadows)
                 if t - tb >= self.cfg.dr_min_age]
 
+    def shadows_mature(self, t):
+        """The number of shadows old enough to test fixes."""
+        return len(self._mature(t))
+
     def rejects(self, t, lat, lon, h, sigma_h, scale=1.0):
         """The oldest mature shadow (its entry) that rejects the fix (horizontal χ²), or None.
 

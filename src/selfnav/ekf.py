@@ -114,6 +114,8 @@ class FilterConfig:
     dr_max_suspect: float = 330.0                # s after which any consistent run re-acquires
     dr_lost_sigma: float = np.inf                # m: … or once the dead reckoning σ exceeds this
     dr_reacq_scale: float = 1.0                  # dead-reckoning σ inflation when re-acquiring
+    dr_reacq_run: float = 20.0                   # s of fixes moving like the dead reckoning that
+                                                 # re-acquire outside its uncertainty
     min_init_speed: float = 5.0                  # heading from the GNSS course above this, m/s
     vertical: str = "free"
     scale_factors: bool = False                  # add gyro and accel scale-factor states (21)

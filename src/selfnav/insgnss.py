@@ -129,6 +129,7 @@ class StreamingNavigator:
         self._still = False
         self._drag = None          # shadow that rejected a fix the filter accepted
         self._t_suspect = None
+        self._guarded = False
 
     # ------------------------------------------------------------------ input
     def add_gnss(self, t, lat, lon, h, sigma_h=np.nan, velocity_n=None):
@@ -321,15 +322,18 @@ class StreamingNavigator:
                 # the dead reckoning has become no better than the outliers it guards against
                 # (or the outage is longer than any outlier episode): a self-consistent run is
                 # taken back as before the guard
-                long_out = (guard is None or fx.t[k] - self._t_suspect > cfg.dr_max_suspect
+                long_out = (not self._guarded or fx.t[k] - self._t_suspect > cfg.dr_max_suspect
                             or flt.P[0, 0] + flt.P[1, 1] > cfg.dr_lost_sigma**2)
                 if win_ok and not long_out:
                     # a smooth drift is self-consistent too: it must also move like the dead
                     # reckoning and sit within its uncertainty (the gate) to be taken back
                     run = self.sus[-(self.streak + cfg.window - 1):]
-                    win_ok = ok and track_agrees([x[0] for x in run], [x[1][:2] for x in run],
-                                                 sh[k], flt.P[3:5, 3:5] * cfg.dr_reacq_scale**2,
-                                                 cfg.dr_fit_sigma)
+                    moves = track_agrees([x[0] for x in run], [x[1][:2] for x in run], sh[k],
+                                         flt.P[3:5, 3:5] * cfg.dr_reacq_scale**2, cfg.dr_fit_sigma)
+                    # outside the dead reckoning's uncertainty only after a long run that moves
+                    # like it (the dead reckoning itself may be lost): a drift changes its rate
+                    long_run = moves and run[-1][0] - run[0][0] >= cfg.dr_reacq_run
+                    win_ok = moves and (ok or long_run)
                 if win_ok and not ok and self.streak >= cfg.window:
                     # a long run of self-consistent fixes that the dead reckoning cannot
                     # explain: its drift exceeded P; re-acquire by widening P to the offset
@@ -369,6 +373,10 @@ class StreamingNavigator:
             if cfg.robust and self.rejections >= cfg.suspect_after and not self.suspect:
                 self.suspect = True
                 self._t_suspect = fx.t[k]
+                # the strict re-acquisition protects a converged filter with a dead-reckoning
+                # reference; one that never got there (started inside an outlier window) may
+                # itself be the lost one: the window test alone takes GNSS back, as before
+                self._guarded = guard is not None and bool(guard.shadows_mature(fx.t[k]))
                 if guard is not None:
                     # dragged before the rejections began? back to the shadow it left
                     drag = self._drag or guard.dragged(fx.t[k], flt, cfg.dr_sigma_scale)

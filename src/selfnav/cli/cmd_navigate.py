@@ -170,7 +170,7 @@ def register(app: typer.Typer) -> None:
             else:
                 aid = init = None
                 if graph is not None:
-                    from selfnav.roadnav import EkfRoadAid
+                    from selfnav.roadaid import EkfRoadAid
                     from selfnav.seedloop import robust_init
 
                     aid = EkfRoadAid(graph, g)
