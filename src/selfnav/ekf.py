@@ -88,6 +88,7 @@ class FilterConfig:
     zupt: bool = True
     zupt_sigma: float = 0.02
     zupt_speed: float = 1.0                      # the INS speed must be below this, m/s
+    zupt_speed_sigmas: float = 0.0               # … or below this many velocity σ (dead reckoning)
     zupt_accel_h: float = 0.1                    # horizontal specific force below this, m/s²
     zupt_gyro: float = np.radians(1.0)           # |ω - mean| threshold over a window, rad/s
     zupt_accel: float = 0.15                     # std of |f| over the window, m/s²

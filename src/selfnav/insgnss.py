@@ -265,7 +265,8 @@ class StreamingNavigator:
         dx = np.zeros(flt.nx)
         if kind == 1:
             # still IMU *and* a slow INS: constant velocity also looks still to an IMU
-            self._still = bool(cfg.zupt and np.linalg.norm(flt.ins.velocity_n) < cfg.zupt_speed
+            v_max = max(cfg.zupt_speed, cfg.zupt_speed_sigmas * float(np.sqrt(flt.P[3, 3] + flt.P[4, 4])))
+            self._still = bool(cfg.zupt and np.linalg.norm(flt.ins.velocity_n) < v_max
                                and _still(w_blk - flt.bg, f_blk - flt.ba, flt.ins.C_nb, cfg))
         if self.guard is not None and self._block is not None:
             self.guard.predict(*self._block, self._still)
