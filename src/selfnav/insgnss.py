@@ -318,7 +318,8 @@ class StreamingNavigator:
                 self.sus = [x for x in self.sus + [(fx.t[k], -r)]
                             if x[0] > fx.t[k] - cfg.degraded_window]
                 win_ok = (len(self.win) >= cfg.window
-                          and _window_consistent(self.win, fx, sh, sv_, s_vel))
+                          and _window_consistent(self.win, fx, sh, sv_, s_vel,
+                                                 trend=self._guarded))
                 self.streak = self.streak + 1 if win_ok else 0
                 # the dead reckoning has become no better than the outliers it guards against
                 # (or the outage is longer than any outlier episode): a self-consistent run is
@@ -488,13 +489,15 @@ def _white_scale(sus, cfg):
     return float(max(s_diff, s_level))
 
 
-def _window_consistent(buf, gnss, sig_h, sig_v, sv):
+def _window_consistent(buf, gnss, sig_h, sig_v, sv, trend=False):
     """The fixes of the window share one offset from the INS displacement (χ², 0.999).
 
     ``d_i = z_i − (INS displacement)_i`` is the same for every fix of a healthy window (the INS
     drift over a few seconds is ``sv·Δt``); the test is ``Σ |d_i − d̄|²/σ_i² ≤ χ²(3(W−1))``.
     Stronger than pairwise tests against errors that wander between fixes (Gauss–Markov
-    outliers), and P cannot weaken it.
+    outliers), and P cannot weaken it. ``trend=True`` fits an offset *and a rate* (the
+    velocity error of a long dead reckoning, which its covariance may understate; the rate is
+    then judged by :func:`selfnav.drguard.track_agrees`): ``χ²(3(W−2))``.
     """
     if len(buf) < 2:
         return True
@@ -508,6 +511,15 @@ def _window_consistent(buf, gnss, sig_h, sig_v, sv):
         var.append([sig_h[k] ** 2 + drift2, sig_h[k] ** 2 + drift2, sig_v[k] ** 2 + drift2])
     d, var = np.array(d), np.array(var)
     w = 1.0 / var
+    if trend and len(buf) > 2:
+        t = np.array([gnss.t[k] for k, _ in buf]) - tm
+        A = np.column_stack([np.ones(len(t)), t])
+        res = np.empty_like(d)
+        for j in range(3):
+            sw = np.sqrt(w[:, j])
+            coef = np.linalg.lstsq(A * sw[:, None], d[:, j] * sw, rcond=None)[0]
+            res[:, j] = d[:, j] - A @ coef
+        return float(np.sum(res**2 * w)) <= _chi2_999(3 * (len(buf) - 2))
     mean = np.sum(d * w, axis=0) / np.sum(w, axis=0)
     chi2 = float(np.sum((d - mean) ** 2 * w))
     return chi2 <= _chi2_999(3 * (len(buf) - 1))
