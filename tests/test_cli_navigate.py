@@ -2,7 +2,6 @@
 and one clear line for bad navigate input."""
 import json
 
-import numpy as np
 import pytest
 
 from selfnav.cli import main
@@ -44,6 +43,23 @@ def test_simulate_navigate_evaluate(sim, tmp_path, capsys):
                           "--json"], capsys)
     assert code == 0, err
     assert json.loads(out)["map"] is not None
+
+
+def test_navigate_vehicle_frame_and_shadow_options(sim, tmp_path, capsys):
+    """--mount-states reports the IMU mounting (the simulated IMU is aligned with the car:
+    near zero), --nhc-lever is parsed, --no-shadows runs the window test alone."""
+    capsys.readouterr()
+    base = ["navigate", "--imu", sim / "imu.csv", "--gnss", sim / "gnss.csv", "--grade",
+            "industrial", "--json"]
+    code, out, err = run(base + ["--out", tmp_path / "a.csv", "--mount-states", "--nhc-lever",
+                                 "0,-1.2,-0.5"], capsys)
+    assert code == 0, err
+    d = json.loads(out)
+    assert len(d["mounting_deg"]) == 2 and max(abs(x) for x in d["mounting_deg"]) < 1.0
+    code, out, err = run(base + ["--out", tmp_path / "b.csv", "--no-shadows"], capsys)
+    assert code == 0, err
+    assert json.loads(out)["shadow_resets"] == 0
+    _err(capsys, base + ["--out", tmp_path / "c.csv", "--nhc-lever", "1,2"], "--nhc-lever")
 
 
 def _err(capsys, argv, *needles):
