@@ -14,6 +14,21 @@ def helsinki():
     return read_roads(packaged_map("helsinki_centre"))
 
 
+
+def _sim_drive(map_name, grade, duration, outlier_s, mag):
+    """Simulated car (labelled simulated), seed 4: one white 200 m window from 150 s."""
+    from selfnav.io.gnss import GnssData
+    from selfnav.simulate.scenarios import simulate
+
+    spec = {"scenario": {"kind": "car", "duration": duration, "map": map_name, "dt": 0.01},
+            "imu": {"grade": grade}, "mag": {"enabled": mag},
+            "gnss": {"outliers": [{"start": 150, "duration": outlier_s, "kind": "white"}],
+                     "spike_rate": 0.0}}
+    sim = simulate(spec, seed=4)
+    f = sim.gnss
+    gd = GnssData(f.t, f.lat, f.lon, f.h, f.sigma_m, None, None, "simulated")
+    return sim, gd, read_roads(sim.map_path)
+
 def test_successors_leave_the_end_node_and_skip_the_twin(helsinki):
     g = helsinki
     off, succ = successor_table(g)
@@ -101,17 +116,8 @@ def test_ekf_with_the_map_holds_the_centre_line():
     white 200 m window; the road aid takes the cross-track RMS well below a metre."""
     from selfnav import ekf
     from selfnav.evaluate import evaluate
-    from selfnav.io.gnss import GnssData
-    from selfnav.simulate.scenarios import simulate
 
-    spec = {"scenario": {"kind": "car", "duration": 240.0, "map": "kotka_karhula", "dt": 0.01},
-            "imu": {"grade": "industrial"}, "mag": {"enabled": False},
-            "gnss": {"outliers": [{"start": 150, "duration": 60, "kind": "white"}],
-                     "spike_rate": 0.0}}
-    sim = simulate(spec, seed=4)
-    f = sim.gnss
-    gd = GnssData(f.t, f.lat, f.lon, f.h, f.sigma_m, None, None, "simulated")
-    g = read_roads(sim.map_path)
+    sim, gd, g = _sim_drive("kotka_karhula", "industrial", 240.0, 60.0, mag=False)
     cfg = ekf.FilterConfig.for_grade("industrial")
     plain = evaluate(sim.truth, ekf.run_filter(sim.imu, gd, cfg).trajectory).metrics
     aided = evaluate(sim.truth, ekf.run_filter(sim.imu, gd, cfg,
@@ -204,18 +210,9 @@ def test_consumer_ekf_with_the_map_through_an_outlier_window():
     4.6 / 1.4 m)."""
     from selfnav import ekf
     from selfnav.evaluate import evaluate
-    from selfnav.io.gnss import GnssData
     from selfnav.seedloop import robust_init
-    from selfnav.simulate.scenarios import simulate
 
-    spec = {"scenario": {"kind": "car", "duration": 300.0, "map": "helsinki_centre", "dt": 0.01},
-            "imu": {"grade": "consumer"}, "mag": {"enabled": True},
-            "gnss": {"outliers": [{"start": 150, "duration": 90, "kind": "white"}],
-                     "spike_rate": 0.0}}
-    sim = simulate(spec, seed=4)
-    f = sim.gnss
-    gd = GnssData(f.t, f.lat, f.lon, f.h, f.sigma_m, None, None, "simulated")
-    g = read_roads(sim.map_path)
+    sim, gd, g = _sim_drive("helsinki_centre", "consumer", 300.0, 90.0, mag=True)
     aid = EkfRoadAid(g, gd)
     res = ekf.run_filter(sim.imu, gd, ekf.FilterConfig.for_grade("consumer"),
                          init=robust_init(sim.imu, gd), road_aid=aid)
