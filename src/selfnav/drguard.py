@@ -14,13 +14,13 @@ truth can be from it. Each fix is tested against every shadow older than ``dr_mi
 
     ν = z − h(x_shadow),   ν^T (H P_shadow H^T + R)^{-1} ν  ≤  χ²₂(0.9999)     (horizontal)
 
-A fix that an older shadow rejects while the filter accepted it means the filter is being
-dragged: the filter is reset to the oldest shadow that rejects (younger shadows, branched from
-the dragged filter, are dropped) and goes into suspect mode (dead reckoning). While suspect no
-shadow is branched; the oldest is kept as the reference for re-acquisition: a run of fixes is
-taken back only when its offset from the dead reckoning is within the dead reckoning's own
-uncertainty *and* its velocity (a line fit over ``dr_vel_window`` s) agrees with the dead
-reckoning velocity — a smooth drift is self-consistent, but it moves at its own speed.
+A fix that a shadow rejects is rejected. When the filter then goes suspect (dead reckoning), it
+is reset to the oldest shadow it has moved away from (in position or velocity; the younger
+shadows, branched from the dragged filter, are dropped), or else its covariance is widened by
+its difference from the youngest shadow. While suspect, shadows are neither branched nor
+retired, and a run of fixes is taken back only when it is within the dead reckoning's
+uncertainty *and* its offset from the dead reckoning stops moving (:func:`track_agrees`) — a
+smooth drift is self-consistent, but it moves at its own speed (:mod:`selfnav.insgnss`).
 
 The shadows are cheaper than the filter: they are propagated and constrained once per
 ``dr_step`` (the NHC then weighs as much per second as the filter's five-per-second updates
@@ -46,6 +46,12 @@ def clone_filter(flt):
         setattr(out, name, np.array(getattr(flt, name), dtype=float, copy=True))
     out._Phi_acc = np.eye(flt.nx)
     return out
+
+
+def _difference(sh, flt):
+    """Position (ENU m) and velocity of ``flt`` less those of shadow ``sh``."""
+    d = _enu_offset(sh.ins.lat, sh.ins.lon, sh.ins.h, flt.ins.lat, flt.ins.lon, flt.ins.h)
+    return d, flt.ins.velocity_n - sh.ins.velocity_n
 
 
 class DeadReckoningGuard:
@@ -87,11 +93,11 @@ class DeadReckoningGuard:
             while len(self.shadows) > 1 and t - self.shadows[0][0] > cfg.dr_max_age:
                 self.shadows.pop(0)
 
-    def predict(self, t, dtheta, dv, still_blocks):
+    def predict(self, t, dtheta, dv, still):
         """Store an IMU block; the shadows are moved once per ``dr_step``."""
         if not self.shadows:
             return
-        self._buf.append((t, dtheta, dv, still_blocks))
+        self._buf.append((t, dtheta, dv, still))
         if t[-1] - self._t_step >= self.cfg.dr_step - 1e-9:
             self._flush()
 
@@ -117,8 +123,8 @@ class DeadReckoningGuard:
 
     # ------------------------------------------------------------------ tests
     def _mature(self, t):
-        return [(i, sh) for i, (tb, sh) in enumerate(self.shadows)
-                if t - tb >= self.cfg.dr_min_age]
+        """The ``[t_branch, filter]`` entries old enough to test, oldest first."""
+        return [e for e in self.shadows if t - e[0] >= self.cfg.dr_min_age]
 
     def shadows_mature(self, t):
         """The number of shadows old enough to test fixes."""
@@ -127,16 +133,15 @@ class DeadReckoningGuard:
     def rejects(self, t, lat, lon, h, sigma_h, scale=1.0):
         """The oldest mature shadow (its entry) that rejects the fix (horizontal χ²), or None.
 
-        ``scale`` inflates the shadows' σ: the drag test uses ``dr_sigma_scale`` (an EKF's
-        dead-reckoning covariance is optimistic after the alignment, and a false alarm costs a
-        reset), the re-acquisition test 1 (a drift must not be taken back).
+        ``scale`` inflates the shadows' σ (``dr_sigma_scale``: an EKF's dead-reckoning
+        covariance is optimistic after the alignment, and a false alarm costs a reset).
         """
         self._flush()
-        for i, sh in self._mature(t):
-            r, H = sh.position_residual(lat, lon, h)
-            S = (H @ sh.P @ H.T)[:2, :2] * scale**2 + np.eye(2) * sigma_h**2
+        for e in self._mature(t):
+            r, H = e[1].position_residual(lat, lon, h)
+            S = (H @ e[1].P @ H.T)[:2, :2] * scale**2 + np.eye(2) * sigma_h**2
             if float(r[:2] @ np.linalg.solve(S, r[:2])) > self.cfg.dr_gate:
-                return self.shadows[i]
+                return e
         return None
 
     def dragged(self, t, flt, scale=1.0):
@@ -145,13 +150,13 @@ class DeadReckoningGuard:
         σ), or None. The velocity is the sharper test: a drift followed for a few seconds
         bends the velocity by its rate (σ 3 m/s at 200 m, 60 s) against a shadow's 0.1–1 m/s."""
         self._flush()
-        for _, sh in self._mature(t):
-            d = _enu_offset(sh.ins.lat, sh.ins.lon, sh.ins.h, flt.ins.lat, flt.ins.lon, flt.ins.h)
-            dv = flt.ins.velocity_n - sh.ins.velocity_n
+        for e in self._mature(t):
+            sh = e[1]
+            d, dv = _difference(sh, flt)
             for r, idx in ((d[:2], slice(0, 2)), (dv[:2], slice(3, 5))):
                 S = sh.P[idx, idx] * scale**2 + flt.P[idx, idx]
                 if float(r @ np.linalg.solve(S, r)) > self.cfg.dr_gate:
-                    return next(e for e in self.shadows if e[1] is sh)
+                    return e
         return None
 
     def widen(self, t, flt):
@@ -165,9 +170,7 @@ class DeadReckoningGuard:
         mature = self._mature(t)
         if not mature:
             return None
-        sh = mature[-1][1]
-        d = _enu_offset(sh.ins.lat, sh.ins.lon, sh.ins.h, flt.ins.lat, flt.ins.lon, flt.ins.h)
-        dv = flt.ins.velocity_n - sh.ins.velocity_n
+        d, dv = _difference(mature[-1][1], flt)
         add = np.zeros_like(flt.P)
         add[IR, IR] = np.diag(d * d)
         add[IV, IV] = np.diag(dv * dv)

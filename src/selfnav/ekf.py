@@ -113,8 +113,6 @@ class FilterConfig:
     dr_gate: float = 18.421                      # χ²₂(0.9999) of a fix against a shadow
     dr_fit_sigma: float = 0.5                    # m/s: re-acquire after a run this sure of its speed
     dr_max_suspect: float = 330.0                # s after which any consistent run re-acquires
-    dr_lost_sigma: float = np.inf                # m: … or once the dead reckoning σ exceeds this
-    dr_reacq_scale: float = 1.0                  # dead-reckoning σ inflation when re-acquiring
     dr_reacq_run: float = 20.0                   # s of fixes moving like the dead reckoning that
                                                  # re-acquire outside its uncertainty
     min_init_speed: float = 5.0                  # heading from the GNSS course above this, m/s

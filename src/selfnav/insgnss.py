@@ -303,17 +303,13 @@ class StreamingNavigator:
         soft = cfg.robust and np.hypot(r[0], r[1]) <= max(cfg.soft_gate_max_m, 3.0 * sh[k])
         ok = nis <= cfg.gate * (cfg.soft_gate if soft else 1.0)
         guard = self.guard
-        shadow_no = None if (guard is None or self.suspect) else guard.rejects(
+        shadow_rej = None if (guard is None or self.suspect) else guard.rejects(
             fx.t[k], fx.lat[k], fx.lon[k], fx.h[k], sh[k], cfg.dr_sigma_scale)
         if cfg.robust:
             # window test: displacements between fixes against the INS displacement, which stays
             # accurate when the absolute INS position has drifted (P cannot weaken it)
             self.win = (self.win + [(k, self.disp.copy())])[-cfg.window:]
             s_vel = float(np.sqrt(np.trace(flt.P[IV, IV]) / 3.0)) + 0.2
-            if self.suspect and guard is not None:
-                # a long dead reckoning is worse than its covariance says (drguard): the tests
-                # that take GNSS back allow for it, or the filter would never re-acquire
-                s_vel *= cfg.dr_reacq_scale
             if self.suspect:
                 self.sus = [x for x in self.sus + [(fx.t[k], -r)]
                             if x[0] > fx.t[k] - cfg.degraded_window]
@@ -321,17 +317,15 @@ class StreamingNavigator:
                           and _window_consistent(self.win, fx, sh, sv_, s_vel,
                                                  trend=self._guarded))
                 self.streak = self.streak + 1 if win_ok else 0
-                # the dead reckoning has become no better than the outliers it guards against
-                # (or the outage is longer than any outlier episode): a self-consistent run is
-                # taken back as before the guard
-                long_out = (not self._guarded or fx.t[k] - self._t_suspect > cfg.dr_max_suspect
-                            or flt.P[0, 0] + flt.P[1, 1] > cfg.dr_lost_sigma**2)
+                # no dead-reckoning reference when it went suspect, or an outage longer than
+                # any outlier episode: a self-consistent run is taken back as before the guard
+                long_out = not self._guarded or fx.t[k] - self._t_suspect > cfg.dr_max_suspect
                 if win_ok and not long_out:
                     # a smooth drift is self-consistent too: it must also move like the dead
                     # reckoning and sit within its uncertainty (the gate) to be taken back
                     run = self.sus[-(self.streak + cfg.window - 1):]
                     moves = track_agrees([x[0] for x in run], [x[1][:2] for x in run], sh[k],
-                                         flt.P[3:5, 3:5] * cfg.dr_reacq_scale**2, cfg.dr_fit_sigma)
+                                         flt.P[3:5, 3:5], cfg.dr_fit_sigma)
                     # outside the dead reckoning's uncertainty only after a long run that moves
                     # like it (the dead reckoning itself may be lost): a drift changes its rate
                     long_run = moves and run[-1][0] - run[0][0] >= cfg.dr_reacq_run
@@ -356,10 +350,10 @@ class StreamingNavigator:
                             self.degraded += 1
             elif len(self.win) > 1:
                 ok = ok and _window_consistent(self.win, fx, sh, sv_, s_vel)
-            if not self.suspect and shadow_no is not None:
+            if not self.suspect and shadow_rej is not None:
                 # a fix the dead reckoning cannot explain; if the filter took it, it is
                 # being dragged (drguard)
-                self._drag = shadow_no if ok else self._drag
+                self._drag = shadow_rej if ok else self._drag
                 ok = False
         self.mode[k] = int(self.suspect)
         if ok:
