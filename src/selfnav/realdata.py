@@ -9,18 +9,18 @@ white or slowly drifting (first-order Gauss–Markov, τ = 60 s).
 """
 from __future__ import annotations
 
+import functools
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
-from scipy.signal import lfilter
 
 from selfnav import ekf
 from selfnav.earth import radii
 from selfnav.io.gnss import GnssData, read_rtklib_pos
 from selfnav.io.rtklibexplorer import read_rtklibexplorer_imu
-from selfnav.sensors import drift_errors
+from selfnav.sensors import outlier_errors
 
 #: IMU time offset that best aligns this log with the RTK solution (innovation RMS scan
 #: −0.45…+0.1 s; upstream uses −0.125 s): see docs/ekf.md.
@@ -52,28 +52,28 @@ def with_outliers(g: GnssData, start, duration=180.0, sigma=200.0, kind="white",
     """Add unflagged horizontal outliers in ``[start, start + duration)``; σ in the file unchanged.
 
     ``kind``: ``"white"``; ``"gm"`` first-order Gauss–Markov (correlated, but rough: 18 m steps
-    between 4 Hz fixes); ``"drift"`` / ``"drift-jump"``: a smooth drift (:func:`drift_errors`)
-    from zero / from its steady state.
+    between 4 Hz fixes); ``"drift"`` / ``"drift-jump"``: a smooth drift
+    (:func:`selfnav.sensors.drift_errors`) from zero / from its steady state.
     """
     rng = np.random.default_rng(seed)
     out = g.select(np.ones(len(g.t), bool))
     out.lat, out.lon = g.lat.copy(), g.lon.copy()
     m = (g.t >= start) & (g.t < start + duration)
     k = int(m.sum())
-    if kind == "white":
-        e = rng.normal(size=(k, 2)) * sigma
-    elif kind in ("drift", "drift-jump"):
-        dt = float(np.median(np.diff(g.t)))
-        e = drift_errors(k, dt, sigma, tau, rng, start="zero" if kind == "drift" else "stationary")
-    else:
-        dt = float(np.median(np.diff(g.t)))
-        a = np.exp(-dt / tau)
-        z = rng.normal(size=(k, 2)) * sigma * np.sqrt(1 - a * a)
-        e = lfilter([1.0], [1.0, -a], z, axis=0, zi=(a * sigma * rng.normal(size=2))[None])[0]
+    e = outlier_errors(kind, k, float(np.median(np.diff(g.t))), sigma, tau, rng)
     rm, rn = radii(g.lat[m])
     out.lat[m] += e[:, 1] / rm
     out.lon[m] += e[:, 0] / (rn * np.cos(g.lat[m]))
     return out
+
+
+@functools.lru_cache(maxsize=2)
+def _load0708(folder: str):
+    """The drive's IMU and RTK solution, read once per folder (a scan runs the filter 48 times;
+    the objects are shared: callers do not modify them)."""
+    folder = Path(folder)
+    return (read_rtklibexplorer_imu(folder / "imu_1934.csv", t_offset=DRIVE0708_T_OFFSET),
+            read_rtklib_pos(folder / "gnss_1934_sf.pos"))
 
 
 def drive0708(folder, *, scenarios=("all", "outages", "white", "gm", "drift", "outage3"),
@@ -93,9 +93,7 @@ def drive0708(folder, *, scenarios=("all", "outages", "white", "gm", "drift", "o
     Outlier scenarios also run the filter without the window test and the shadow dead
     reckoning (``robust=False``: the plain χ² gate).
     """
-    folder = Path(folder)
-    imu = read_rtklibexplorer_imu(folder / "imu_1934.csv", t_offset=DRIVE0708_T_OFFSET)
-    truth = read_rtklib_pos(folder / "gnss_1934_sf.pos")
+    imu, truth = _load0708(str(Path(folder).resolve()))
     out = {}
     for sc in scenarios:
         ends, win = [], None

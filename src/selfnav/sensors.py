@@ -411,6 +411,21 @@ def drift_errors(n, dt, sigma, tau, rng, *, start="zero"):
     return e
 
 
+def outlier_errors(kind, n, dt, sigma, tau, rng):
+    """``n`` horizontal outlier errors (E, N metres) at interval ``dt`` of an
+    :class:`OutlierWindow` kind: white, gm (first-order Gauss–Markov from its steady state),
+    drift / drift-jump (:func:`drift_errors` from zero / its steady state)."""
+    if kind == "gm":
+        a = np.exp(-dt / tau)
+        z = rng.normal(size=(n, 2)) * sigma * np.sqrt(1 - a * a)
+        return lfilter([1.0], [1.0, -a], z, axis=0, zi=(a * sigma * rng.normal(size=2))[None])[0]
+    if kind == "white":
+        return rng.normal(size=(n, 2)) * sigma
+    if kind in ("drift", "drift-jump"):
+        return drift_errors(n, dt, sigma, tau, rng, start="zero" if kind == "drift" else "stationary")
+    raise SelfnavError(f"unknown outlier kind '{kind}' (white, gm, drift or drift-jump)")
+
+
 def random_outlier_windows(t0, t1, count, rng, *, max_duration=300.0, sigma=200.0,
                            kinds=("white", "gm"), startup=False):
     """``count`` non-overlapping outlier windows placed uniformly in ``[t0, t1]``.
@@ -505,18 +520,7 @@ class GnssModel:
             k = int(m.sum())
             if not k:
                 continue
-            if w.kind == "gm":
-                a = np.exp(-dt / w.tau)
-                z = rng.normal(size=(k, 2)) * w.sigma * np.sqrt(1 - a * a)
-                e = lfilter([1.0], [1.0, -a], z, axis=0, zi=(a * w.sigma * rng.normal(size=2))[None])[0]
-            elif w.kind == "white":
-                e = rng.normal(size=(k, 2)) * w.sigma
-            elif w.kind in ("drift", "drift-jump"):
-                e = drift_errors(k, dt, w.sigma, w.tau, rng,
-                                 start="zero" if w.kind == "drift" else "stationary")
-            else:
-                raise SelfnavError(f"unknown outlier kind '{w.kind}' (white, gm, drift or "
-                                   "drift-jump)")
+            e = outlier_errors(w.kind, k, dt, w.sigma, w.tau, rng)
             err[m, :2] = e
         spike = rng.uniform(size=n) < self.spike_rate
         err[spike, :2] += rng.normal(size=(int(spike.sum()), 2)) * self.spike_sigma
