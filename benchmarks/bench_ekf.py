@@ -9,10 +9,10 @@ import time
 
 import numpy as np
 
-from selfnav import ekf
-from selfnav.io.gnss import GnssData
-from selfnav.io.imu import ImuData
-from selfnav.roads import packaged_map, read_roads
+from selfnav import ins
+from selfnav.types import GnssData
+from selfnav.types import ImuData
+from selfnav.roads.graph import packaged_map, read_roads
 from selfnav.sensors import GnssModel, imu_grade
 from selfnav.simulate.car import car_trajectory
 from selfnav.simulate.inverse import imu_from_trajectory
@@ -34,9 +34,9 @@ def main():
     data = ImuData(imu.t, w, f)
     gd = GnssData(fx.t, fx.lat, fx.lon, fx.h, fx.sigma_m)
     for smooth in (False, True):
-        cfg = ekf.FilterConfig.for_grade("industrial")
+        cfg = ins.FilterConfig.for_grade("industrial")
         t0 = time.perf_counter()
-        res = ekf.run_filter(data, gd, cfg, smooth=smooth)
+        res = ins.run_filter(data, gd, cfg, smooth=smooth)
         el = time.perf_counter() - t0
         span = imu.t[-1] - imu.t[0]
         print(f"filter{' + RTS smoother' if smooth else ''}: {el:.2f} s for {span / 60:.0f} min "

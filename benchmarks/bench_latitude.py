@@ -12,7 +12,8 @@ import time
 import numpy as np
 
 from selfnav import latitude as L
-from selfnav.io import read_imu, write_csv
+from selfnav.io.csvio import write_csv
+from selfnav.io.readers import read_imu
 from selfnav.simulate.static import static_imu
 
 

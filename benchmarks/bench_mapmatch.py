@@ -14,8 +14,8 @@ import time
 
 import numpy as np
 
-from selfnav.mapmatch import HmmMatcher
-from selfnav.roads import packaged_map, project_to_polyline, read_roads
+from selfnav.roads.hmm import HmmMatcher
+from selfnav.roads.graph import packaged_map, project_to_polyline, read_roads
 from selfnav.simulate.car import car_route
 
 MAPS = ("kotka_karhula", "helsinki_centre")

@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
+from selfnav import attitude as att
 from selfnav import moving as mv
 from selfnav.simulate.ship import exact_body_rates, ship_trajectory
 
@@ -41,14 +42,14 @@ def main() -> None:
         print(f"{method:9s} {dt:6.2f} s  ({n / dt / 1e3:.0f} k samples/s)  lat RMS {np.sqrt(np.mean(e**2)):.2e}°  "
               f"lon end {np.degrees(sol.lon[-1] - tr.lon[-1]):+.2e}°  {'OK' if dt < 5 else 'SLOW'} (< 5 s)")
     if a.cli:
-        from selfnav.io import write_csv
+        from selfnav.io.csvio import write_csv
 
         with tempfile.TemporaryDirectory() as d:
             d = Path(d)
             f = np.einsum("nij,j->ni", tr.C_nb, [0.0, 0.0, 9.8])
             write_csv(d / "imu.csv", dict(t=tr.t, wx=w[:, 0], wy=w[:, 1], wz=w[:, 2], fx=f[:, 0],
                                           fy=f[:, 1], fz=f[:, 2]), comments=[tr.source], fmt="%.15g")
-            r, p, h = tr.euler()
+            r, p, h = att.euler_from_dcm_nb(tr.C_nb)
             write_csv(d / "att.csv", dict(t=tr.t, roll_deg=np.degrees(r), pitch_deg=np.degrees(p),
                                           heading_deg=np.degrees(h)), comments=[tr.source], fmt="%.12g")
             cmd = [sys.executable, "-m", "selfnav", "moving", "--imu", str(d / "imu.csv"), "--attitude",

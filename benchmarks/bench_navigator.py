@@ -11,12 +11,12 @@ from __future__ import annotations
 import argparse
 import time
 
-from selfnav import ekf
-from selfnav.io.gnss import GnssData
-from selfnav.mapmatch import match_gnss
-from selfnav.roadaid import EkfRoadAid
-from selfnav.roads import read_roads
-from selfnav.seedloop import SeedConfig, run_seed
+from selfnav import ins
+from selfnav.types import GnssData
+from selfnav.roads.hmm import match_gnss
+from selfnav.roads.aid import EkfRoadAid
+from selfnav.roads.graph import read_roads
+from selfnav.seed004 import SeedConfig, run_seed
 from selfnav.simulate.scenarios import simulate
 
 
@@ -35,8 +35,8 @@ def main():
     jobs = {
         "seed loop (seed)": lambda: run_seed(sim.imu, gd, graph, SeedConfig(matcher="seed")),
         "seed loop (mht)": lambda: run_seed(sim.imu, gd, graph, SeedConfig(matcher="mht")),
-        "EKF": lambda: ekf.run_filter(sim.imu, gd, ekf.FilterConfig.for_grade("consumer")),
-        "EKF + map": lambda: ekf.run_filter(sim.imu, gd, ekf.FilterConfig.for_grade("consumer"),
+        "EKF": lambda: ins.run_filter(sim.imu, gd, ins.FilterConfig.for_grade("consumer")),
+        "EKF + map": lambda: ins.run_filter(sim.imu, gd, ins.FilterConfig.for_grade("consumer"),
                                             road_aid=EkfRoadAid(graph, gd)),
     }
     print(f"{len(sim.imu.t)} IMU samples at {1 / sim.imu.dt:.0f} Hz, {len(gd.t)} fixes, {span:.0f} s")

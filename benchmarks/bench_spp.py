@@ -14,8 +14,9 @@ from pathlib import Path
 import numpy as np
 
 from selfnav.io.smartloc import find_smartloc_files, read_smartloc_input, read_smartloc_truth
-from selfnav.odometry import OdoConfig, ecef_to_plane, horizontal_metrics, run_odometry_filter, run_smartloc
-from selfnav.spp import SppConfig, horizontal_error, spp_from_pseudoranges
+from selfnav.earth import ecef_to_enu
+from selfnav.gnss.odometry import OdoConfig, horizontal_metrics, run_odometry_filter, run_smartloc
+from selfnav.gnss.spp import SppConfig, horizontal_error, spp_from_pseudoranges
 
 DEFAULT = Path(__file__).resolve().parents[2] / "shared" / "data" / "smartloc_berlin_potsdamer_platz"
 
@@ -63,8 +64,8 @@ def main(folder):
     print("\n## Sensitivity to the fix σ scale (RMS m: robust / gate only / smoother)\n")
     sp = spp_from_pseudoranges(prs, SppConfig(weighting="cn0"))
     origin = (sp.lat[0], sp.lon[0], sp.h[0])
-    z = ecef_to_plane(sp.ecef, origin)[:, :2]
-    g = ecef_to_plane(truth.ecef, origin)[:, :2]
+    z = ecef_to_enu(sp.ecef, *origin)[:, :2]
+    g = ecef_to_enu(truth.ecef, *origin)[:, :2]
     print("| σ scale | robust | gate only | smoother | robust, no heading widening |")
     print("| --- | --- | --- | --- | --- |")
     for sc in (1.5, 2.0, 3.0, 4.0, 8.0):

@@ -1,7 +1,7 @@
 """Benchmark: strapdown mechanization throughput on one core (target > 2e6 samples/s).
 
 Run: ``python benchmarks/bench_strapdown.py [n_samples]``. Prints samples per second for the
-batch kernel (:func:`selfnav.strapdown.integrate`) and for the streaming ``Strapdown.update``.
+batch kernel (:func:`selfnav.ins.strapdown.integrate`) and for the streaming ``Strapdown.update``.
 The data are simulated (a turning, accelerating body with noise), labelled so.
 """
 import sys
@@ -11,7 +11,7 @@ import numpy as np
 
 from selfnav import attitude as att
 from selfnav.earth import earth_rate_n, normal_gravity
-from selfnav.strapdown import Strapdown, integrate
+from selfnav.ins.strapdown import Strapdown, integrate
 
 
 def simulated_increments(n, dt=0.005, seed=0):

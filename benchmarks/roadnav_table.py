@@ -21,15 +21,17 @@ import time
 
 import numpy as np
 
-from selfnav import ekf, sensors
+from selfnav import sensors
+from selfnav import ins
 from selfnav.evaluate import evaluate
-from selfnav.io.gnss import GnssData
-from selfnav.mapmatch import match_gnss
-from selfnav.roadaid import EkfRoadAid
-from selfnav.roads import project_to_polyline, read_roads
-from selfnav.seedloop import SeedConfig, robust_init, run_seed
+from selfnav.types import GnssData
+from selfnav.roads.hmm import match_gnss
+from selfnav.roads.aid import EkfRoadAid
+from selfnav.roads.graph import project_to_polyline, read_roads
+from selfnav.ins.align import robust_init
+from selfnav.seed004 import SeedConfig, run_seed
 from selfnav.simulate.scenarios import simulate
-from selfnav.simulate.trajectory import Trajectory
+from selfnav.types import Trajectory
 
 
 def scenario(map_name, duration, seed, outliers=True):
@@ -103,12 +105,12 @@ def run_one(map_name, duration, seed, outliers=True):
         t0 = time.perf_counter()
         r = run_seed(sim.imu, gd, graph, SeedConfig(matcher=matcher))
         rows[name] = metrics(sim, graph, r.trajectory, time.perf_counter() - t0)
-    cfg = ekf.FilterConfig.for_grade("consumer")
+    cfg = ins.FilterConfig.for_grade("consumer")
     for name, aid in (("EKF", None), ("EKF + map", True)):
         t0 = time.perf_counter()
         # EKF + map: the road aid and the health-checked start (robust_init); EKF: as shipped
         init = robust_init(sim.imu, gd) if aid else None
-        res = ekf.run_filter(sim.imu, gd, cfg, init=init,
+        res = ins.run_filter(sim.imu, gd, cfg, init=init,
                              road_aid=EkfRoadAid(graph, gd) if aid else None)
         rows[name] = metrics(sim, graph, res.trajectory, time.perf_counter() - t0)
     t_start = rows["EKF + map"]["start_s"]

@@ -3,11 +3,11 @@ import numpy as np
 import pytest
 
 from selfnav import attitude as att
-from selfnav.align import (DEG, DEG_PER_H, align_in_motion, align_static, coarse_align,
+from selfnav.ins.align import (DEG, DEG_PER_H, align_in_motion, align_static, coarse_align,
                            fine_align, levelling, noise_densities, triad, velocity_from_positions)
 from selfnav.earth import OMEGA_EARTH, normal_gravity, radii
 from selfnav.errors import SelfnavError
-from selfnav.io.imu import ImuData
+from selfnav.types import ImuData
 from selfnav.simulate.static import rocking, static_imu
 
 G0 = 9.80665

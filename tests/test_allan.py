@@ -5,7 +5,7 @@ import allantools
 import numpy as np
 
 from selfnav import allan
-from selfnav.io.imu import ImuData
+from selfnav.types import ImuData
 from selfnav.sensors import (DEG_PER_H, DEG_PER_SQRT_H, MPS_PER_SQRT_H, ImuErrorModel,
                              SensorTriad)
 

@@ -1,12 +1,14 @@
 """A simulated car on real OpenStreetMap roads (selfnav.simulate.car): stays on the centre line,
 respects one-ways and its acceleration limits, stops, and gives a consistent trajectory."""
 import numpy as np
+
+from selfnav import attitude as att
 import pytest
 
 from selfnav.errors import InputError
-from selfnav.roads import packaged_map, project_to_polyline, read_roads
+from selfnav.roads.graph import packaged_map, project_to_polyline, read_roads
 from selfnav.simulate.car import CarTrajectory, car_route, car_trajectory, smooth_path
-from selfnav.simulate.trajectory import Trajectory
+from selfnav.types import Trajectory
 
 A_MAX, LAT_MAX, V_MAX = 2.0, 2.5, 20.0
 
@@ -81,7 +83,7 @@ def test_car_stays_on_the_centre_line(helsinki, request, which, tol):
 
 def test_heading_follows_the_road(helsinki, exact_drive):
     traj, route = exact_drive
-    _, pitch, heading = traj.euler()
+    _, pitch, heading = att.euler_from_dcm_nb(traj.C_nb)
     x, y = helsinki.to_local(traj.lat, traj.lon)
     grid_heading = heading - helsinki.true_heading_offset(x, y)
     e = route.path.element(route.s)
@@ -118,7 +120,7 @@ def test_velocity_and_attitude_are_consistent(helsinki, drive):
     fwd = C[moving, 1, :]            # second row of C_nb: the forward axis in ENU
     np.testing.assert_allclose(fwd[:, :2] * speed[moving, None],
                                traj.velocity_n[moving, :2], atol=1e-9)
-    roll, _, _ = traj.euler()
+    roll, _, _ = att.euler_from_dcm_nb(traj.C_nb)
     assert np.max(np.abs(roll)) < np.radians(1.0)        # small body roll in corners
 
 

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from selfnav.cli import main
-from selfnav.io import write_csv
+from selfnav.io.csvio import write_csv
 from selfnav.simulate.static import static_imu
 
 DEGH = np.pi / 180 / 3600

@@ -5,7 +5,7 @@ from pyproj import Transformer
 from pyproj.transformer import TransformerGroup
 
 from selfnav import datum as D
-from selfnav.earth import KRASOVSKY, PZ90, WGS84, ecef_to_geodetic, enu_basis, geodetic_to_ecef
+from selfnav.earth import KRASOVSKY, PZ90, WGS84, ecef_to_geodetic, enu_rotation, geodetic_to_ecef
 from selfnav.errors import SelfnavError
 
 # A grid over the territory where SK-42 is used (Kaliningrad to Chukotka, Caucasus to Arctic).
@@ -29,8 +29,8 @@ def _full_5044_pipeline():
 
 
 def _enu(lat, lon):
-    """(N, 3, 3) ECEF -> ENU matrices (earth.enu_basis is per point)."""
-    return np.stack([enu_basis(a, b) for a, b in zip(np.atleast_1d(lat), np.atleast_1d(lon))])
+    """(N, 3, 3) ECEF -> ENU matrices (earth.enu_rotation is per point)."""
+    return np.stack([enu_rotation(a, b) for a, b in zip(np.atleast_1d(lat), np.atleast_1d(lon))])
 
 
 def _horizontal_m(lat1, lon1, lat2, lon2, ell):

@@ -3,10 +3,11 @@ import numpy as np
 import pytest
 
 from selfnav import attitude as att
-from selfnav import ekf
-from selfnav.drguard import clone_filter, track_agrees
-from selfnav.io.imu import ImuData
-from selfnav.roads import packaged_map, read_roads
+from selfnav import ins
+from selfnav.ins import ekf
+from selfnav.ins.guard import clone_filter, track_agrees
+from selfnav.types import ImuData
+from selfnav.roads.graph import packaged_map, read_roads
 from selfnav.sensors import OutlierWindow, drift_errors
 
 from test_ekf import _drive, _errors, _window_metrics
@@ -43,7 +44,7 @@ def test_track_agrees():
 
 def test_clone_is_independent(graph):
     imu, g, truth = _drive(graph, 1, duration=120.0)
-    cfg = ekf.FilterConfig.for_grade("industrial")
+    cfg = ins.FilterConfig.for_grade("industrial")
     flt = ekf.InsGnssFilter(cfg, imu.t[0], truth.lat[0], truth.lon[0], truth.h[0],
                             truth.velocity_n[0], truth.C_nb[0])
     sh = clone_filter(flt)
@@ -66,8 +67,8 @@ def test_smooth_drift_is_caught_by_the_shadow_dead_reckoning(graph):
         imu, g, truth = _drive(graph, 3, duration=700.0, outliers=[win], grade="consumer")
         out = {}
         for guard in (True, False):
-            cfg = ekf.FilterConfig.for_grade("consumer", scale_factors=False, dr_guard=guard)
-            out[guard] = _window_metrics(ekf.run_filter(imu, g, cfg), truth, win)
+            cfg = ins.FilterConfig.for_grade("consumer", scale_factors=False, use_shadows=guard)
+            out[guard] = _window_metrics(ins.run_filter(imu, g, cfg), truth, win)
         assert out[True][0] < 18.0 and out[True][1] < 40.0 and out[True][2] < 5.0, (kind, out)
         assert out[False][0] > 5 * out[True][0], (kind, out)
 
@@ -78,12 +79,12 @@ def test_mounting_angles_are_estimated(graph):
     mu = np.radians([1.5, -2.5])
     C_vb = att.rotvec_to_dcm(np.array([mu[0], 0.0, mu[1]]))
     imu_m = ImuData(imu.t, imu.omega_ib_b @ C_vb, imu.f_ib_b @ C_vb, source="simulated, mounted")
-    cfg = ekf.FilterConfig.for_grade("industrial", nhc_sigma=0.1, mount_states=True)
-    res = ekf.run_filter(imu_m, g, cfg)
+    cfg = ins.FilterConfig.for_grade("industrial", nhc_sigma=0.1, mount_states=True)
+    res = ins.run_filter(imu_m, g, cfg)
     est = res.mounting[-1]
     assert np.degrees(np.abs(est - mu)).max() < 0.3, np.degrees(est)
     # without the states the NHC fights the 2.5° yaw: the position is worse
-    res0 = ekf.run_filter(imu_m, g, ekf.FilterConfig.for_grade("industrial", nhc_sigma=0.1))
+    res0 = ins.run_filter(imu_m, g, ins.FilterConfig.for_grade("industrial", nhc_sigma=0.1))
     rms = []
     for r in (res, res0):
         t, dp, *_ = _errors(r, truth)

@@ -5,12 +5,13 @@ import numpy as np
 import pytest
 
 from selfnav import attitude as att
-from selfnav import ekf
+from selfnav import ins
+from selfnav.ins import ekf
 from selfnav.earth import radii
-from selfnav.insgnss import StreamingNavigator, init_from_gnss
-from selfnav.io.gnss import GnssData
-from selfnav.io.imu import ImuData
-from selfnav.roads import packaged_map, read_roads
+from selfnav.ins.navigator import StreamingNavigator, init_from_gnss
+from selfnav.types import GnssData
+from selfnav.types import ImuData
+from selfnav.roads.graph import packaged_map, read_roads
 from selfnav.sensors import GnssModel, OutlierWindow, imu_grade
 from selfnav.simulate.car import car_trajectory
 from selfnav.simulate.inverse import imu_from_trajectory
@@ -66,8 +67,8 @@ def test_statistical_consistency_on_simulated_drives(graph):
         imu, g, truth = _drive(graph, seed)
         # the simulated car never slips nor bounces: the non-holonomic constraint is exact, so
         # the filter is given a tighter σ (its default 0.3 m/s stands for real roads)
-        cfg = ekf.FilterConfig.for_grade("industrial", nhc_sigma=0.1)
-        res = ekf.run_filter(imu, g, cfg)
+        cfg = ins.FilterConfig.for_grade("industrial", nhc_sigma=0.1)
+        res = ins.run_filter(imu, g, cfg)
         t, dp, dv, psi, ok = _errors(res, truth)
         late = t > t[0] + 60  # after the in-motion alignment transient
         zp.append((dp / res.sigma_enu[ok][:, :2])[late])
@@ -92,8 +93,8 @@ def test_unflagged_outlier_windows_white_and_drifting(graph):
         out = {}
         for robust in (True, False):
             # the simulated IMU has no scale-factor errors (_drive): no scale-factor states
-            cfg = ekf.FilterConfig.for_grade("consumer", robust=robust, scale_factors=False)
-            out[robust] = _window_metrics(ekf.run_filter(imu, g, cfg), truth, win)
+            cfg = ins.FilterConfig.for_grade("consumer", robust=robust, scale_factors=False)
+            out[robust] = _window_metrics(ins.run_filter(imu, g, cfg), truth, win)
         rob, plain = out[True], out[False]
         # "rest" includes the consumer IMU's first minutes after alignment (stop-and-go): 5 m
         assert rob[0] < 18.0 and rob[1] < 40.0 and rob[2] < 5.0, (kind, rob)
@@ -105,7 +106,7 @@ def test_unflagged_outlier_windows_white_and_drifting(graph):
 def test_outliers_at_start_up(graph):
     win = OutlierWindow(0.0, 60.0, 200.0, "white")
     imu, g, truth = _drive(graph, 5, outliers=[win])
-    res = ekf.run_filter(imu, g, ekf.FilterConfig.for_grade("industrial"))
+    res = ins.run_filter(imu, g, ins.FilterConfig.for_grade("industrial"))
     assert res.trajectory.t[0] >= 60.0  # started on trusted fixes only
     t, dp, *_ = _errors(res, truth)
     assert np.sqrt(np.mean(np.sum(dp**2, 1))) < 3.0
@@ -114,9 +115,9 @@ def test_outliers_at_start_up(graph):
 def test_smoother_beats_filter(graph):
     win = OutlierWindow(200.0, 120.0, 200.0, "gm")
     imu, g, truth = _drive(graph, 2, outliers=[win])
-    cfg = ekf.FilterConfig.for_grade("industrial")
-    f = ekf.run_filter(imu, g, cfg)
-    s = ekf.run_filter(imu, g, cfg, smooth=True)
+    cfg = ins.FilterConfig.for_grade("industrial")
+    f = ins.run_filter(imu, g, cfg)
+    s = ins.run_filter(imu, g, cfg, smooth=True)
     assert s.smoothed and not f.smoothed
     _, dpf, *_ = _errors(f, truth)
     _, dps, _, _, ok = _errors(s, truth)
@@ -128,9 +129,9 @@ def test_smoother_beats_filter(graph):
 
 def test_streaming_equals_batch(graph):
     imu, g, truth = _drive(graph, 1, duration=120.0)
-    cfg = ekf.FilterConfig.for_grade("industrial")
-    batch = ekf.run_filter(imu, g, cfg)
-    init = init_from_gnss(imu, g, cfg, np.maximum(g.sigma_m, cfg.gnss_sigma_floor))
+    cfg = ins.FilterConfig.for_grade("industrial")
+    batch = ins.run_filter(imu, g, cfg)
+    init = init_from_gnss(imu, g, cfg, np.maximum(g.sigma_m, cfg.gnss.sigma_floor))
     nav = StreamingNavigator(cfg, init)
     k = 0
     for i in range(0, len(imu.t), 7):  # 7-sample packets; a fix before the packet passing it
@@ -150,7 +151,7 @@ def test_streaming_equals_batch(graph):
 
 
 def _filter_at(C_nb, P_att=np.radians(5.0)):
-    cfg = ekf.FilterConfig.for_grade("industrial")
+    cfg = ins.FilterConfig.for_grade("industrial")
     flt = ekf.InsGnssFilter(cfg, 0.0, 0.9, 0.4, 10.0, np.array([10.0, 0.0, 0.0]), C_nb)
     flt.P[6:9, 6:9] = np.eye(3) * P_att**2
     return flt
@@ -172,7 +173,7 @@ def test_heading_and_road_updates_move_toward_truth():
 
 
 def test_drive0708_real_data(shared_data):
-    from selfnav.realdata import drive0708
+    from experiments.drive_0708 import drive0708
 
     r = drive0708(shared_data / "rtklibexplorer_drive_0708")
     assert r["all"]["filter"]["rms_m"] < 0.3

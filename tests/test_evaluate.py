@@ -11,9 +11,11 @@ from selfnav import attitude as att
 from selfnav.cli import main
 from selfnav.earth import ecef_to_geodetic, geodetic_to_ecef
 from selfnav.errors import SelfnavError
-from selfnav.evaluate import enu_matrices, error_metrics, evaluate
+from selfnav.earth import enu_rotation
+from selfnav.evaluate import error_metrics, evaluate
 from selfnav.report import write_report
-from selfnav.simulate.trajectory import Trajectory, write_truth
+from selfnav.types import Trajectory
+from selfnav.io.trajectory import write_truth
 
 LAT0, LON0, H0 = np.radians(59.9343), np.radians(30.3351), 20.0
 
@@ -21,7 +23,7 @@ LAT0, LON0, H0 = np.radians(59.9343), np.radians(30.3351), 20.0
 def _from_enu(enu, lat0=LAT0, lon0=LON0, h0=H0):
     """Geodetic (rad, rad, m) of local ENU points (m) about (lat0, lon0, h0)."""
     x0 = geodetic_to_ecef(lat0, lon0, h0)
-    C = enu_matrices(lat0, lon0)[0]
+    C = enu_rotation(lat0, lon0)
     return ecef_to_geodetic(x0 + np.asarray(enu) @ C)
 
 
@@ -49,8 +51,8 @@ def _offset_solution(truth_t, enu, offset_enu):
     lat, lon, h = _from_enu(enu)
     out = []
     for k in range(len(truth_t)):
-        x = geodetic_to_ecef(lat[k], lon[k], h[k]) + np.asarray(offset_enu[k]) @ enu_matrices(
-            lat[k], lon[k])[0]
+        x = geodetic_to_ecef(lat[k], lon[k], h[k]) + np.asarray(offset_enu[k]) @ enu_rotation(
+            lat[k], lon[k])
         out.append(ecef_to_geodetic(x))
     out = np.array(out)
     n = len(truth_t)
@@ -222,16 +224,16 @@ def test_report_with_road_background(tmp_path):
 def test_cli_map_real_osm_extract(tmp_path, capsys):
     """End to end on the packaged real OpenStreetMap extract (Kotka): a simulated drive along
     its longest way, a solution 2 m to the right of the road; --map gives road cross-track 2 m."""
-    from selfnav.evaluate import _local_xy
-    from selfnav.roads import packaged_map, road_polylines
+    from selfnav.evaluate import local_xy
+    from selfnav.roads.graph import packaged_map, road_polylines
 
     path = packaged_map("kotka_karhula")
     polys = road_polylines(path)
-    lengths = [np.linalg.norm(np.diff(_local_xy(r[:, 0], r[:, 1], r[0, 0], r[0, 1]), axis=0),
+    lengths = [np.linalg.norm(np.diff(local_xy(r[:, 0], r[:, 1], r[0, 0], r[0, 1]), axis=0),
                               axis=1).sum() for r in polys]
     road = polys[int(np.argmax(lengths))]
     lat0, lon0 = road[0]
-    xy = _local_xy(road[:, 0], road[:, 1], lat0, lon0)
+    xy = local_xy(road[:, 0], road[:, 1], lat0, lon0)
     seg = np.diff(xy, axis=0)
     s_cum = np.concatenate([[0.0], np.cumsum(np.linalg.norm(seg, axis=1))])
     s = np.arange(0.5, s_cum[-1] - 1.0, 20.0) + 0.37  # 20 m/s, never exactly on a vertex
@@ -263,23 +265,23 @@ def test_cli_map_real_osm_extract(tmp_path, capsys):
 
 
 def test_cli_map_hook(files, capsys, monkeypatch):
-    """--map goes through selfnav.roads.road_polylines(path) -> [(M, 2) lat/lon rad]."""
+    """--map goes through selfnav.roads.graph.road_polylines(path) -> [(M, 2) lat/lon rad]."""
     import sys
     import types
 
-    from selfnav.simulate.trajectory import read_truth
+    from selfnav.io.trajectory import read_truth
 
     tr = read_truth(files / "truth.csv")
-    fake = types.ModuleType("selfnav.roads")
+    fake = types.ModuleType("selfnav.roads.graph")
     fake.road_polylines = lambda path: [np.column_stack([tr.lat, tr.lon])]
-    monkeypatch.setitem(sys.modules, "selfnav.roads", fake)
+    monkeypatch.setitem(sys.modules, "selfnav.roads.graph", fake)
     args = ["evaluate", "--truth", str(files / "truth.csv"), "--solution", str(files / "sol.csv"),
             "--json", "--map", str(files / "roads.osm")]
     assert main(args) == 0
     out = json.loads(capsys.readouterr().out)
     # solution is 1 m East of a track heading 30°: cross-track (right +) = cos 30°
     assert out["road_cross_track_mean_m"] == pytest.approx(np.cos(np.radians(30)), abs=1e-4)
-    monkeypatch.setitem(sys.modules, "selfnav.roads", None)  # module absent
+    monkeypatch.setitem(sys.modules, "selfnav.roads.graph", None)  # module absent
     assert main(args) == 2
     err = capsys.readouterr().err.strip()
-    assert "selfnav.roads" in err and "\n" not in err
+    assert "selfnav.roads.graph" in err and "\n" not in err

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from selfnav.fogmems import _load, evaluate_fog_mems, fog_gnss
+from experiments.psins_fog_mems import _load, evaluate_fog_mems, fog_gnss
 
 DATA = Path("/work/shared/data/psins_fog_mems_vehicle")
 pytestmark = pytest.mark.skipif(not (DATA / "mimu.csv").exists(), reason="data set not present")

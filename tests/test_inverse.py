@@ -5,7 +5,7 @@ from selfnav import attitude as att
 from selfnav import earth
 from selfnav.simulate.inverse import TrajectorySpline, imu_from_trajectory
 from selfnav.simulate.static import static_imu
-from selfnav.simulate.trajectory import Trajectory
+from selfnav.types import Trajectory
 
 LAT0, LON0, H0 = np.radians(50.45), np.radians(30.52), 100.0
 OMEGA_E = np.array([0.0, 0.0, earth.OMEGA_EARTH])
@@ -107,7 +107,7 @@ def test_rotation_only_slow_motion_returns_attitude():
 class _Circle:
     """A constant-rate level turn (radius 200 m, 20 m/s) defined in ECEF, with a 0.2 rad bank."""
 
-    E = earth.enu_basis(LAT0, LON0)
+    E = earth.enu_rotation(LAT0, LON0)
     r0 = earth.geodetic_to_ecef(LAT0, LON0, H0)
     R, w = 200.0, 0.1
 
@@ -122,7 +122,7 @@ class _Circle:
     def state(self, t):
         r, v, a = self.ecef(t)
         lat, lon, h = earth.ecef_to_geodetic(r)
-        C_en = np.stack([earth.enu_basis(la, lo) for la, lo in zip(lat, lon)])
+        C_en = np.stack([earth.enu_rotation(la, lo) for la, lo in zip(lat, lon)])
         vn = np.einsum("nij,nj->ni", C_en, v)
         hd = np.arctan2(vn[:, 0], vn[:, 1])
         pt = np.arcsin(vn[:, 2] / np.linalg.norm(vn, axis=1))
@@ -157,7 +157,7 @@ def test_constant_rate_turn_matches_ecef_oracle():
 
 
 def test_round_trip_through_strapdown_turn_and_aircraft():
-    from selfnav import strapdown as sd
+    from selfnav.ins import strapdown as sd
     from selfnav.simulate.aircraft import aircraft_trajectory
 
     c = _Circle()
@@ -176,7 +176,7 @@ def test_round_trip_through_strapdown_turn_and_aircraft():
 
 
 def test_static_hour_round_trip_below_a_millimetre():
-    from selfnav import strapdown as sd
+    from selfnav.ins import strapdown as sd
     t = np.arange(0.0, 3600.0 + 1e-9, 10.0)
     n = len(t)
     C = att.dcm_nb_from_euler(0.02, 0.01, 2.0)

@@ -4,13 +4,13 @@ import pytest
 
 from selfnav import attitude as att
 from selfnav.errors import InputError
-from selfnav.io.gnss import GnssData
-from selfnav.io.imu import ImuData
+from selfnav.types import GnssData
+from selfnav.types import ImuData
 from selfnav.io.kfgins import (c_nb_enu_rfu, frd_to_rfu, kfgins_euler, read_kfgins_gnss,
                                read_kfgins_imu, read_kfgins_nav, write_kfgins_gnss,
                                write_kfgins_imu, write_kfgins_nav)
 from selfnav.io.nmea_rmc import KNOT, read_nmea_rmc
-from selfnav.simulate.trajectory import Trajectory
+from selfnav.types import Trajectory
 
 D = np.pi / 180
 
@@ -133,7 +133,7 @@ def test_nav_known_row(tmp_path):
                  "0 100.1 30.0 114.0 20.0 3.0 4.0 -1.0 2.0 5.0 315.0\n")
     tr = read_kfgins_nav(p)
     assert np.allclose(tr.velocity_n[0], [4.0, 3.0, 1.0])
-    r, pt, h = tr.euler()
+    r, pt, h = att.euler_from_dcm_nb(tr.C_nb)
     assert np.allclose(np.degrees([r[0], pt[0], h[0]]), [2.0, 5.0, 315.0])
     assert np.isclose(np.degrees(h[1]), 315.0)
 

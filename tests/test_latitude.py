@@ -4,7 +4,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from selfnav import latitude as L
-from selfnav.io import read_imu
+from selfnav.io.readers import read_imu
 from selfnav.simulate.static import multiposition_imu, rocking, static_imu
 
 DEGH = L.DEG_PER_H

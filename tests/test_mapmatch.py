@@ -1,4 +1,4 @@
-"""GNSS-only map matching (selfnav.mapmatch, ``selfnav match``) on real OpenStreetMap roads with
+"""GNSS-only map matching (selfnav.roads.hmm, ``selfnav match``) on real OpenStreetMap roads with
 simulated 5-second floating-car tracks (simulated data, labelled so in the files written)."""
 import itertools
 import json
@@ -9,8 +9,8 @@ import pytest
 
 from selfnav.cli import main
 from selfnav.io.csvio import read_table, write_csv
-from selfnav.mapmatch import HmmMatcher, _viterbi, node_distances
-from selfnav.roads import packaged_map, project_to_polyline, read_roads
+from selfnav.roads.hmm import HmmMatcher, _viterbi, node_distances
+from selfnav.roads.graph import packaged_map, project_to_polyline, read_roads
 from selfnav.simulate.car import car_route
 
 
@@ -162,7 +162,7 @@ def test_cli_match_errors_are_one_line(tmp_path, capsys, maps):
 
 
 def test_snap_to_road_uses_the_direction_of_travel(maps):
-    from selfnav.mapmatch import snap_to_road
+    from selfnav.roads.hmm import snap_to_road
 
     g = maps["helsinki_centre"]
     two_way = np.flatnonzero((g.seg_twin >= 0) & (g.seg_len > 30))[0]

@@ -124,7 +124,7 @@ def test_results_files(tmp_path):
     c = mc.write_results(tmp_path / "r.csv", r)
     text = c.read_text()
     assert text.startswith("# simulated")
-    from selfnav.io import read_table
+    from selfnav.io.csvio import read_table
 
     back = read_table(c, ("run", "seed", "error", "sigma"))
     assert np.allclose(back["error"], r.table["error"], rtol=1e-9)

@@ -8,7 +8,7 @@ from selfnav import attitude as att
 from selfnav import moving as mv
 from selfnav.cli import main
 from selfnav.earth import OMEGA_EARTH
-from selfnav.io import write_csv
+from selfnav.io.csvio import write_csv
 from selfnav.io.attitude_file import internal_attitude
 from selfnav.simulate.ship import exact_body_rates, nav_rate_n, ship_trajectory
 
@@ -87,7 +87,7 @@ def test_ship_acceptance(lat0_deg, course, method):
     tr = ship_trajectory(1800.0, 0.01, np.radians(lat0_deg), np.radians(150.0), course_deg=course)
     sp = np.linalg.norm(tr.velocity_n, axis=1)
     assert 4.99 < sp.min() and sp.max() < 7.01
-    r, p, h = tr.euler()
+    r, p, h = att.euler_from_dcm_nb(tr.C_nb)
     assert np.degrees(np.abs(r).max()) == pytest.approx(5.0, abs=0.01)
     assert np.degrees(np.abs(p).max()) == pytest.approx(2.0, abs=0.01)
     sol = mv.MovingBaseNavigator(np.radians(lat0_deg), np.radians(150.0), method=method).run(
@@ -197,7 +197,7 @@ def _write_ship(tmp_path, duration=120.0, dt=0.01, att_dt=None, radians=False,
     imu = tmp_path / "imu.csv"
     write_csv(imu, dict(t=tr.t, wx=w[:, 0], wy=w[:, 1], wz=w[:, 2], fx=f[:, 0], fy=f[:, 1], fz=f[:, 2]),
               comments=[tr.source], fmt="%.15g")
-    r, p, h = tr.euler()
+    r, p, h = att.euler_from_dcm_nb(tr.C_nb)
     sel = slice(None) if att_dt is None else slice(None, None, int(round(att_dt / dt)))
     ang = [np.degrees(x[sel]) for x in (r, p, np.mod(h, 2 * np.pi))]
     if radians:
@@ -281,7 +281,7 @@ def test_heading_wraparound_handled(tmp_path):
 
 # ----------------------------------------------------------------------------- real data
 def test_real_static_xian_agrees_with_static_method(shared_data):
-    from selfnav.io import read_imu
+    from selfnav.io.readers import read_imu
     from selfnav.latitude import estimate_latitude
 
     imu = read_imu(shared_data / "psins_lasergyro_static" / "lasergyro.imu", "psins")
@@ -315,8 +315,9 @@ def test_real_fog_mems_runs_and_is_not_usable(shared_data):
 @pytest.mark.parametrize("imu_step,att_step,att_shift", [(2, 1, 0.0), (1, 7, 0.003)])
 def test_different_rates(imu_step, att_step, att_shift):
     """Attitude faster than the IMU (slerp onto IMU times) and slower, unaligned (gyros composed)."""
-    from selfnav.io import ImuData
-    from selfnav.io.attitude_file import AttitudeData, navigate_imu_attitude
+    from selfnav.types import ImuData
+    from selfnav.io.attitude_file import navigate_imu_attitude
+    from selfnav.types import AttitudeData
 
     tr = ship_trajectory(900.0, 0.01, np.radians(-20.0), np.radians(5.0), course_deg=200.0)
     w = exact_body_rates(tr)

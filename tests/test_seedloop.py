@@ -3,9 +3,9 @@ import numpy as np
 import pytest
 
 from selfnav import datum as dm
-from selfnav.io.gnss import GnssData
-from selfnav.roads import read_roads
-from selfnav.seedloop import SeedConfig, _tukey, identify, road_points, run_seed
+from selfnav.types import GnssData
+from selfnav.roads.graph import read_roads
+from selfnav.seed004 import SeedConfig, _tukey, identify, road_points, run_seed
 from selfnav.simulate.scenarios import simulate
 
 
@@ -66,7 +66,7 @@ def test_cli_navigate_seed_writes_sk42(drive, tmp_path, capsys):
     import json
 
     from selfnav.cli import main
-    from selfnav.io import read_table
+    from selfnav.io.csvio import read_table
     from selfnav.simulate.scenarios import write_simulation
 
     sim, _ = drive

@@ -6,7 +6,7 @@ from pyproj import Geod
 from selfnav import attitude as att
 from selfnav import sensors as S
 from selfnav.errors import SelfnavError
-from selfnav.simulate.trajectory import Trajectory
+from selfnav.types import Trajectory
 
 LAT0, LON0 = np.radians(60.52), np.radians(26.95)
 

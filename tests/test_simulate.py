@@ -6,10 +6,11 @@ import pytest
 
 from selfnav import attitude as att
 from selfnav.cli import main
-from selfnav.io import read_imu, read_table
+from selfnav.io.csvio import read_table
+from selfnav.io.readers import read_imu
 from selfnav.simulate import scenarios as sc
 from selfnav.simulate.aircraft import aircraft_trajectory
-from selfnav.simulate.trajectory import read_truth
+from selfnav.io.trajectory import read_truth
 
 
 @pytest.mark.parametrize("name", sc.BUILTIN)

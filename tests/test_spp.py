@@ -1,4 +1,4 @@
-"""Single-point positioning (selfnav.spp) and the smartLoc readers (selfnav.io.smartloc)."""
+"""Single-point positioning (selfnav.gnss.spp) and the smartLoc readers (selfnav.io.smartloc)."""
 import time
 
 import numpy as np
@@ -7,7 +7,8 @@ import pytest
 from selfnav.earth import geodetic_to_ecef
 from selfnav.errors import InputError
 from selfnav.io.smartloc import find_smartloc_files, read_smartloc_input, read_smartloc_truth
-from selfnav.spp import (C_LIGHT, OMEGA_EARTH, SppConfig, ecef_to_enu_matrices, horizontal_error,
+from selfnav.earth import enu_rotation
+from selfnav.gnss.spp import (C_LIGHT, OMEGA_EARTH, SppConfig, horizontal_error,
                          sagnac_rotate, solve_spp, spp_from_pseudoranges)
 
 LAT0, LON0, H0 = np.radians(52.5046), np.radians(13.3737), 40.0
@@ -18,7 +19,7 @@ CLK = {1: 1.2e5, 4: 1.2e5 + 37.0, 8: -3.0e4}
 def satellites(n_gps=7, n_glo=4, n_gal=0, seed=0, min_el=15.0):
     """Satellites above the receiver: (ECEF at transmit time, system, elevation)."""
     rng = np.random.default_rng(seed)
-    C = ecef_to_enu_matrices(LAT0, LON0)[0]
+    C = enu_rotation(LAT0, LON0)
     sats, syss, els = [], [], []
     for sys_code, n, radius in ((1, n_gps, 26_560e3), (4, n_glo, 25_510e3), (8, n_gal, 29_600e3)):
         for _ in range(n):
@@ -47,7 +48,7 @@ def ranges(sat, sys_codes, rx=RX):
 
 
 def enu_error(res, rx=RX):
-    C = ecef_to_enu_matrices(LAT0, LON0)[0]
+    C = enu_rotation(LAT0, LON0)
     return (res.ecef - rx) @ C.T
 
 

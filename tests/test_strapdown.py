@@ -6,7 +6,7 @@ from scipy.optimize import curve_fit
 from selfnav import attitude as att
 from selfnav.earth import OMEGA_EARTH, WGS84, earth_rate_n, normal_gravity, radii
 from selfnav.errors import SelfnavError
-from selfnav.strapdown import (Strapdown, _gravity, _params, increments_from_rates, integrate,
+from selfnav.ins.strapdown import (Strapdown, _gravity, _params, increments_from_rates, integrate,
                                slow_period_speed)
 
 G0 = 9.80665
@@ -303,7 +303,7 @@ def test_bad_input_is_refused():
 
 def test_round_trip_of_a_simulated_road_drive():
     """Issue 3 round trip: a 10-min car drive, exact inverse strapdown at 200 Hz, < 0.1 m."""
-    from selfnav.roads import packaged_map, read_roads
+    from selfnav.roads.graph import packaged_map, read_roads
     from selfnav.simulate.car import car_trajectory
     from selfnav.simulate.inverse import imu_from_trajectory
 

@@ -1,6 +1,57 @@
 """selfnav: navigation that does not trust, or does not have, satellite signals.
 
-Modules follow DESIGN.md: ``earth`` and ``attitude`` (§2), ``latitude`` (§3, seed 000),
-``io`` (§6) and the command line in ``selfnav.cli``.
+Conventions (DESIGN §2), everywhere in the package:
+
+* **Units**: SI and radians inside; degrees only at the edges, and every such name says so
+  (``lat_deg``, ``heading_deg``).
+* **Frames**: navigation frame ENU (East, North, Up); body frame RFU (Right, Forward, Up).
+  ``C_nb`` rotates navigation-frame vectors into the body frame (``v_b = C_nb @ v_n``); its
+  second row is the forward axis in ENU. Names carry their frames (``velocity_n``,
+  ``omega_ib_b``, ``f_ib_b``).
+* **IMU rows** hold the mean rate and specific force over the interval *ending* at ``t``.
+* **Time**: float64 seconds, strictly increasing, one time base per run.
+
+The Python API (each also a ``selfnav`` command):
+
+>>> import selfnav
+>>> imu = selfnav.read_imu("imu.csv")                      # doctest: +SKIP
+>>> gnss = selfnav.read_gnss("gnss.csv")                   # doctest: +SKIP
+>>> sol = selfnav.navigate(imu, gnss, roads=None)          # doctest: +SKIP
+>>> sol.to_csv("sol.csv")                                  # doctest: +SKIP
+>>> selfnav.evaluate("truth.csv", sol)["horizontal_rms_m"] # doctest: +SKIP
+
+``read_imu, read_gnss, read_roads, read_solution, read_attitude`` read files;
+``estimate_latitude`` (seed 000), ``MovingBaseNavigator`` (seeds 002/003), ``navigate``
+(EKF or seed 004, with or without roads), ``match`` (GNSS-only map matching) and
+``evaluate`` run the methods; ``simulate`` makes data with known truth.
 """
-__version__ = "0.1.0"
+
+__version__ = "0.2.0"
+
+# The API is loaded on first use (PEP 562), so that ``import selfnav`` and the command line start
+# fast; ``from selfnav import navigate`` works as usual.
+_API = {
+    "read_imu": "selfnav.api", "read_imu_positions": "selfnav.api", "read_gnss": "selfnav.api",
+    "read_roads": "selfnav.api", "read_solution": "selfnav.api", "read_attitude": "selfnav.api",
+    "estimate_latitude": "selfnav.api", "navigate": "selfnav.api", "match": "selfnav.api",
+    "evaluate": "selfnav.api", "filter_config": "selfnav.api", "Solution": "selfnav.api",
+    "simulate": "selfnav.simulate.scenarios", "MovingBaseNavigator": "selfnav.moving",
+    "ImuData": "selfnav.types", "GnssData": "selfnav.types", "Trajectory": "selfnav.types",
+    "AttitudeData": "selfnav.types",
+}
+
+__all__ = ["__version__", *_API]
+
+
+def __getattr__(name):
+    if name in _API:
+        import importlib
+
+        value = getattr(importlib.import_module(_API[name]), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module 'selfnav' has no attribute '{name}'")
+
+
+def __dir__():
+    return sorted(set(globals()) | set(_API))

@@ -27,6 +27,21 @@ def skew(v):
     )
 
 
+def skew3(v):
+    """:func:`skew` of one 3-vector (the per-epoch fast path of the filter)."""
+    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+
+
+def rotvec_to_dcm3(rv):
+    """:func:`rotvec_to_dcm` of one rotation vector (the per-epoch fast path)."""
+    th2 = float(rv @ rv)
+    K = skew3(rv)
+    if th2 < 1e-12:
+        return np.eye(3) + K + 0.5 * (K @ K)
+    th = np.sqrt(th2)
+    return np.eye(3) + np.sin(th) / th * K + (1.0 - np.cos(th)) / th2 * (K @ K)
+
+
 def vee(m):
     """Inverse of :func:`skew` (antisymmetric part)."""
     m = np.asarray(m, dtype=float)
@@ -35,7 +50,9 @@ def vee(m):
     )
 
 
-def _frame_rot(axis: int, a):
+def frame_rotation(axis: int, a):
+    """Frame rotation about axis 0 (x), 1 (y) or 2 (z) by ``a`` rad (the factors of
+    :func:`dcm_nb_from_euler`)."""
     a = np.asarray(a, dtype=float)
     c, s = np.cos(a), np.sin(a)
     o, z = np.ones_like(a), np.zeros_like(a)
@@ -54,7 +71,7 @@ def dcm_nb_from_euler(roll, pitch, heading):
     Heading is clockwise from true North; the seeds' yaw is ``ψ = -heading``.
     """
     psi = -np.asarray(heading, dtype=float)
-    return _frame_rot(1, roll) @ _frame_rot(0, pitch) @ _frame_rot(2, psi)
+    return frame_rotation(1, roll) @ frame_rotation(0, pitch) @ frame_rotation(2, psi)
 
 
 def dcm_bn_from_euler(roll, pitch, heading):

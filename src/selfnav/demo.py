@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from selfnav.cli.common import jsonable
+from selfnav.io.jsonio import jsonable
 from selfnav.io.csvio import atomic_write_bytes
 
 SITE_LAT_DEG = 34.246048
@@ -44,12 +44,12 @@ def navigation_demo(duration: float = 420.0, seeds=(1, 2, 3)) -> dict:
 
     Returns the RMS and max over all drives, and the first drive's tracks for the plot.
     """
-    from selfnav import ekf
+    from selfnav import ins
     from selfnav.evaluate import evaluate
-    from selfnav.io.gnss import GnssData
-    from selfnav.roadaid import EkfRoadAid
-    from selfnav.roads import read_roads
-    from selfnav.seedloop import robust_init
+    from selfnav.types import GnssData
+    from selfnav.roads.aid import EkfRoadAid
+    from selfnav.roads.graph import read_roads
+    from selfnav.ins.align import robust_init
     from selfnav.simulate.scenarios import simulate
 
     spec = {"scenario": {"kind": "car", "duration": duration, "map": "kotka_karhula", "dt": 0.01},
@@ -69,8 +69,8 @@ def navigation_demo(duration: float = 420.0, seeds=(1, 2, 3)) -> dict:
         gd = GnssData(g.t, g.lat, g.lon, g.h, g.sigma_m, None, None, "simulated")
         tracks = {}
         for name, robust, road in names:
-            cfg = ekf.FilterConfig.for_grade("consumer", robust=robust)
-            res = ekf.run_filter(sim.imu, gd, cfg, init=robust_init(sim.imu, gd) if road else None,
+            cfg = ins.FilterConfig.for_grade("consumer", robust=robust)
+            res = ins.run_filter(sim.imu, gd, cfg, init=robust_init(sim.imu, gd) if road else None,
                                  road_aid=EkfRoadAid(graph, gd) if road else None)
             m = evaluate(sim.truth, res.trajectory).metrics
             sq[name].append(m["horizontal_rms_m"] ** 2)
@@ -97,7 +97,7 @@ def run_demo(out_dir: Path) -> dict:
 
     import matplotlib.pyplot as plt
 
-    from selfnav.io import read_imu
+    from selfnav.io.readers import read_imu
     from selfnav.latitude import estimate_latitude
 
     imu = read_imu(packaged("lasergyro.imu.gz"), "psins")

@@ -169,8 +169,49 @@ def ecef_to_geodetic(xyz, ellipsoid: Ellipsoid = WGS84, *, iterations: int = 5):
     return lat, lon, h
 
 
-def enu_basis(lat, lon):
-    """Rows are the East, North, Up unit vectors in ECEF: the matrix ``C_e^n`` (ECEF -> ENU)."""
-    sl, cl = np.sin(lat), np.cos(lat)
-    so, co = np.sin(lon), np.cos(lon)
-    return np.array([[-so, co, 0.0], [-sl * co, -sl * so, cl], [cl * co, cl * so, sl]])
+def enu_rotation(lat, lon):
+    """``C_e^n`` (ECEF -> ENU; rows are the East, North, Up unit vectors in ECEF).
+
+    Scalars give one (3, 3) matrix, arrays a stack (..., 3, 3).
+    """
+    lat = np.asarray(lat, dtype=float)
+    lon = np.asarray(lon, dtype=float)
+    sl, cl, so, co = np.sin(lat), np.cos(lat), np.sin(lon), np.cos(lon)
+    z = np.zeros(np.broadcast(lat, lon).shape)
+    return np.stack([np.stack(np.broadcast_arrays(-so, co, z), -1),
+                     np.stack(np.broadcast_arrays(-sl * co, -sl * so, cl), -1),
+                     np.stack(np.broadcast_arrays(cl * co, cl * so, sl), -1)], axis=-2)
+
+
+def ecef_to_enu(xyz, lat0, lon0, h0=0.0, ellipsoid: Ellipsoid = WGS84):
+    """ECEF points (..., 3) to exact tangent-plane ENU metres at (lat0, lon0, h0)."""
+    r0 = geodetic_to_ecef(lat0, lon0, h0, ellipsoid)
+    return (np.asarray(xyz, dtype=float) - r0) @ enu_rotation(lat0, lon0).T
+
+
+def geodetic_to_enu(lat, lon, h, lat0, lon0, h0=0.0, ellipsoid: Ellipsoid = WGS84):
+    """Exact tangent-plane ENU metres (..., 3) of geodetic points at (lat0, lon0, h0)."""
+    return ecef_to_enu(geodetic_to_ecef(lat, lon, h, ellipsoid), lat0, lon0, h0, ellipsoid)
+
+
+def enu_to_geodetic(enu, lat0, lon0, h0=0.0, ellipsoid: Ellipsoid = WGS84):
+    """Tangent-plane ENU metres (..., 3) at (lat0, lon0, h0) back to geodetic (lat, lon, h)."""
+    r0 = geodetic_to_ecef(lat0, lon0, h0, ellipsoid)
+    return ecef_to_geodetic(r0 + np.asarray(enu, dtype=float) @ enu_rotation(lat0, lon0),
+                            ellipsoid)
+
+
+def enu_offset(lat0, lon0, h0, lat, lon, h, ellipsoid: Ellipsoid = WGS84):
+    """ENU metres of (lat, lon, h) from (lat0, lon0, h0), small-offset form (curvature radii
+    at the origin; exact to ~1e-7 relative over a few km). Arrays broadcast to (..., 3)."""
+    rm, rn = radii(lat0, h0, ellipsoid)
+    return np.stack(np.broadcast_arrays((np.asarray(lon) - lon0) * rn * np.cos(lat0),
+                                        (np.asarray(lat) - lat0) * rm,
+                                        np.asarray(h) - h0), axis=-1)
+
+
+def offset_to_geodetic(lat0, lon0, h0, enu, ellipsoid: Ellipsoid = WGS84):
+    """Inverse of :func:`enu_offset`: (lat, lon, h) of ENU offsets (..., 3) from the origin."""
+    rm, rn = radii(lat0, h0, ellipsoid)
+    enu = np.asarray(enu, dtype=float)
+    return (lat0 + enu[..., 1] / rm, lon0 + enu[..., 0] / (rn * np.cos(lat0)), h0 + enu[..., 2])

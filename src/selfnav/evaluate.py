@@ -23,23 +23,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from selfnav.earth import WGS84, geodetic_to_ecef
+from selfnav import attitude as att
+from selfnav.earth import WGS84, enu_rotation, geodetic_to_ecef, geodetic_to_enu
 from selfnav.errors import SelfnavError
-from selfnav.simulate.trajectory import Trajectory
+from selfnav.types import Trajectory
 
 #: Speed below which the direction of motion is not trusted as a heading, m/s.
 MIN_SPEED = 0.2
-
-
-def enu_matrices(lat, lon):
-    """ECEF -> ENU rotation for each point, shape ``(N, 3, 3)`` (rows East, North, Up)."""
-    lat = np.atleast_1d(np.asarray(lat, dtype=float))
-    lon = np.atleast_1d(np.asarray(lon, dtype=float))
-    sl, cl, so, co = np.sin(lat), np.cos(lat), np.sin(lon), np.cos(lon)
-    z = np.zeros_like(lat)
-    return np.stack([np.stack([-so, co, z], -1),
-                     np.stack([-sl * co, -sl * so, cl], -1),
-                     np.stack([cl * co, cl * so, sl], -1)], axis=-2)
 
 
 def _interp_angle(t_new, t, a):
@@ -73,14 +63,14 @@ def truth_heading(truth: Trajectory):
     direction (a stop keeps the heading it arrived with).
     """
     if np.all(np.isfinite(truth.C_nb)):
-        return truth.euler()[2]
+        return att.euler_from_dcm_nb(truth.C_nb)[2]
     if np.all(np.isfinite(truth.velocity_n[:, :2])):
         ve, vn = truth.velocity_n[:, 0], truth.velocity_n[:, 1]
     else:
         if len(truth) < 2:
             return np.full(len(truth), np.nan)
         x = geodetic_to_ecef(truth.lat, truth.lon, truth.h, WGS84)
-        E = enu_matrices(truth.lat, truth.lon)
+        E = enu_rotation(truth.lat, truth.lon)
         d = np.gradient(x, truth.t, axis=0)
         v = np.einsum("nij,nj->ni", E, d)
         ve, vn = v[:, 0], v[:, 1]
@@ -157,10 +147,9 @@ def error_metrics(error_enu, along=None, cross=None, road_along=None, road_cross
     return m
 
 
-def _local_xy(lat, lon, lat0, lon0):
+def local_xy(lat, lon, lat0, lon0):
     """East/North metres of points in the tangent plane at (lat0, lon0) (for road geometry)."""
-    x = geodetic_to_ecef(lat, lon, 0.0, WGS84) - geodetic_to_ecef(lat0, lon0, 0.0, WGS84)
-    return (x @ enu_matrices(lat0, lon0)[0].T)[..., :2]
+    return geodetic_to_enu(lat, lon, 0.0, lat0, lon0, 0.0)[..., :2]
 
 
 def road_direction(points_xy, roads_xy, chunk: int = 2_000_000):
@@ -234,7 +223,7 @@ def evaluate(truth: Trajectory, solution: Trajectory, *, roads=None,
     th = np.interp(t, truth.t, truth.h)
     sl, slon, sh = solution.lat[inside], solution.lon[inside], solution.h[inside]
     d = geodetic_to_ecef(sl, slon, sh, WGS84) - geodetic_to_ecef(tl, tlon, th, WGS84)
-    e = np.einsum("nij,nj->ni", enu_matrices(tl, tlon), d)
+    e = np.einsum("nij,nj->ni", enu_rotation(tl, tlon), d)
     hdg = _interp_angle(t, truth.t, truth_heading(truth))
     along, cross = along_cross(e, np.column_stack([np.sin(hdg), np.cos(hdg)]))
     if np.isnan(hdg).all():
@@ -242,8 +231,8 @@ def evaluate(truth: Trajectory, solution: Trajectory, *, roads=None,
     ra = rc = None
     if roads is not None:
         lat0, lon0 = tl[0], tlon[0]
-        rxy = [_local_xy(r[:, 0], r[:, 1], lat0, lon0) for r in roads]
-        u, dist = road_direction(_local_xy(tl, tlon, lat0, lon0), rxy)
+        rxy = [local_xy(r[:, 0], r[:, 1], lat0, lon0) for r in roads]
+        u, dist = road_direction(local_xy(tl, tlon, lat0, lon0), rxy)
         flip = u[:, 0] * np.sin(hdg) + u[:, 1] * np.cos(hdg) < 0
         u[flip] *= -1.0
         ra, rc = along_cross(e, u)
@@ -258,20 +247,20 @@ def evaluate(truth: Trajectory, solution: Trajectory, *, roads=None,
 
 
 def load_road_polylines(path):
-    """Road polylines ``[(M_i, 2) (lat, lon) rad]`` from a map file through :mod:`selfnav.roads`.
+    """Road polylines ``[(M_i, 2) (lat, lon) rad]`` from a map file through :mod:`selfnav.roads.graph`.
 
-    The hook for ``--map``: it needs ``selfnav.roads.road_polylines(path)`` (same return
+    The hook for ``--map``: it needs ``selfnav.roads.graph.road_polylines(path)`` (same return
     contract). Raises :class:`SelfnavError` with one line when the roads module is absent.
     """
     import importlib
 
     try:
-        roads = importlib.import_module("selfnav.roads")
+        roads = importlib.import_module("selfnav.roads.graph")
     except ImportError:
-        raise SelfnavError("--map needs the selfnav.roads module, which this installation "
+        raise SelfnavError("--map needs the selfnav.roads.graph module, which this installation "
                            "lacks") from None
     fn = getattr(roads, "road_polylines", None)
     if fn is None:
-        raise SelfnavError("selfnav.roads has no road_polylines(path): road-relative "
+        raise SelfnavError("selfnav.roads.graph has no road_polylines(path): road-relative "
                            "along/cross-track is not available yet")
     return [np.asarray(r, dtype=float) for r in fn(path)]

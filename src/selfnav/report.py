@@ -70,19 +70,19 @@ def error_figure(ev) -> bytes:
 
 def track_figure(ev, roads=None) -> bytes:
     """Truth and solution tracks in local East/North metres, over the road map when given."""
-    from selfnav.evaluate import _local_xy
+    from selfnav.evaluate import local_xy
 
     plt = _pyplot()
     lat0, lon0 = ev.truth_lat[0], ev.truth_lon[0]
-    txy = _local_xy(ev.truth_lat, ev.truth_lon, lat0, lon0)
-    sxy = _local_xy(ev.sol_lat, ev.sol_lon, lat0, lon0)
+    txy = local_xy(ev.truth_lat, ev.truth_lon, lat0, lon0)
+    sxy = local_xy(ev.sol_lat, ev.sol_lon, lat0, lon0)
     fig, ax = plt.subplots(figsize=(7, 7))
     if roads:
         lo, hi = np.minimum(txy.min(0), sxy.min(0)), np.maximum(txy.max(0), sxy.max(0))
         pad = 0.1 * max(float(np.max(hi - lo)), 50.0)
         drawn = 0
         for r in roads:
-            xy = _local_xy(r[:, 0], r[:, 1], lat0, lon0)
+            xy = local_xy(r[:, 0], r[:, 1], lat0, lon0)
             if np.any((xy >= lo - pad).all(1) & (xy <= hi + pad).all(1)):
                 ax.plot(xy[:, 0], xy[:, 1], color="0.75", lw=2, zorder=0,
                         label="roads (map)" if drawn == 0 else None)

@@ -31,14 +31,8 @@ from scipy.signal import lfilter
 from selfnav import attitude as att
 from selfnav.earth import radii
 from selfnav.errors import SelfnavError
+from selfnav.units import DEG, DEG_PER_H, DEG_PER_SQRT_H, G0, MPS_PER_SQRT_H, PPM, UG
 
-DEG = np.pi / 180.0
-DEG_PER_H = DEG / 3600.0
-DEG_PER_SQRT_H = DEG / 60.0           # °/√h -> rad/√s
-MPS_PER_SQRT_H = 1.0 / 60.0           # m/s/√h -> m/s/√s
-G0 = 9.80665
-UG = 1e-6 * G0
-PPM = 1e-6
 
 #: Allan-deviation floor of flicker bias instability, in units of B (IEEE 952, Table C.1).
 FLICKER_FLOOR = float(np.sqrt(2.0 * np.log(2.0) / np.pi))
@@ -238,10 +232,20 @@ GRADES = {
 }
 
 
+#: The one sensor-grade vocabulary of the package (best first). ``perfect`` (no errors) is for
+#: the simulator; ``auto`` (noise measured from the data) for the navigator.
+GRADE_NAMES = tuple(GRADES)
+
+
+def grade_key(name: str) -> str:
+    """Normalised grade name (lower case, stripped)."""
+    return str(name).lower().strip()
+
+
 def imu_grade(name: str) -> ImuErrorModel:
     """The preset error model of a grade: navigation, tactical, industrial, consumer, perfect."""
-    key = name.lower().strip()
-    if key in ("perfect", "none", "ideal"):
+    key = grade_key(name)
+    if key == "perfect":
         return GRADES["navigation"].scaled(0.0)
     if key not in GRADES:
         raise SelfnavError(f"unknown IMU grade '{name}' (use {', '.join(GRADES)} or perfect)")
@@ -351,7 +355,7 @@ def magnetic_heading(mag_b, roll, pitch, declination=0.0):
     so ``H = D + atan2(-m_hx, m_hy)``. ``declination = 0`` returns the magnetic heading.
     """
     m = np.asarray(mag_b, dtype=float)
-    Rt = np.swapaxes(att._frame_rot(1, roll) @ att._frame_rot(0, pitch), -1, -2)
+    Rt = np.swapaxes(att.frame_rotation(1, roll) @ att.frame_rotation(0, pitch), -1, -2)
     mh = np.einsum("...ij,...j->...i", Rt, m)
     return np.mod(np.arctan2(-mh[..., 0], mh[..., 1]) + declination, 2 * np.pi)
 
@@ -497,7 +501,7 @@ class GnssModel:
     datum: str = "wgs84"
 
     def simulate(self, traj, rng) -> GnssFixes:
-        """Fixes along a :class:`~selfnav.simulate.trajectory.Trajectory` (interpolated)."""
+        """Fixes along a :class:`~selfnav.types.Trajectory` (interpolated)."""
         rng = np.random.default_rng(rng)
         if not 0.0 < self.rate_hz <= 100.0:
             raise SelfnavError(f"GNSS rate {self.rate_hz} Hz outside (0, 100]")

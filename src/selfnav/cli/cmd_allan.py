@@ -45,7 +45,7 @@ def register(app: typer.Typer) -> None:
         """Allan deviation of gyros and accelerometers; ARW, VRW, bias instability, random walk."""
         from selfnav.allan import analyze_imu, plot_allan
         from selfnav.errors import InputError
-        from selfnav.io import read_imu
+        from selfnav.io.readers import read_imu
 
         data = read_imu(imu, fmt)
         if len(data) < 100:

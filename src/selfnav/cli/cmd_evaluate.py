@@ -22,11 +22,11 @@ def register(app: typer.Typer) -> None:
         map_path: Optional[Path] = typer.Option(None, "--map", help="Road map (OpenStreetMap "
                                                 ".osm/.osm.pbf): road-relative along/cross-track "
                                                 "and the map under the track (needs "
-                                                "selfnav.roads)."),
+                                                "selfnav.roads.graph)."),
     ):
         """Horizontal RMS / 95 % / max and vertical RMS error; along/cross-track."""
         from selfnav.evaluate import evaluate, load_road_polylines
-        from selfnav.simulate.trajectory import read_truth
+        from selfnav.io.trajectory import read_truth
 
         tr = read_truth(truth)
         sol = read_truth(solution)

@@ -50,7 +50,7 @@ def register(app: typer.Typer) -> None:
     ):
         """Latitude (and heading, pitch, roll) of a site from an IMU at rest (seed 000)."""
         from selfnav import latitude as lat_mod
-        from selfnav.io import read_imu_positions
+        from selfnav.io.readers import read_imu_positions
 
         if requirements:
             _requirements(lat_deg, seed_constants, as_json)

@@ -27,8 +27,8 @@ def run_match(gnss: Path, map_path: Path, out: Path, *, sigma_m=10.0, radius_m=N
               gnss_datum=None, out_datum=None):
     """Read, match, write; return the JSON summary (the library call behind the command)."""
     from selfnav.io.csvio import check_time, read_table, write_csv
-    from selfnav.mapmatch import HmmMatcher
-    from selfnav.roads import read_roads
+    from selfnav.roads.hmm import HmmMatcher
+    from selfnav.roads.graph import read_roads
 
     tab = read_table(gnss, ("t", "lat_deg", "lon_deg"), optional=("h_m", "sigma_m"))
     t = check_time(tab, min_rows=1)

@@ -40,7 +40,8 @@ def register(app: typer.Typer) -> None:
     ) -> None:
         """Latitude by seed 002 (13) and longitude by (14) from gyros and an attitude source."""
         from selfnav.cli.common import emit_json
-        from selfnav.io import read_imu, write_csv
+        from selfnav.io.csvio import write_csv
+        from selfnav.io.readers import read_imu
         from selfnav.io.attitude_file import read_attitude
         from selfnav.io.attitude_file import navigate_imu_attitude
         from selfnav.moving import GRADES

@@ -1,10 +1,7 @@
-"""Readers and writers: the native CSV schema of DESIGN §6 and real formats (PSINS, ...).
+"""Readers and writers: the native CSV schema of DESIGN §6 and real formats (PSINS, RTKLIB,
+NMEA, KF-GINS, rtklibexplorer, smartLoc).
 
 Every reader validates what it loads and raises :class:`selfnav.errors.InputError` with the file,
-line or column and the likely cause. Time is float64 seconds, strictly increasing.
+line or column and the likely cause. Time is float64 seconds, strictly increasing. Readers build
+the containers of :mod:`selfnav.types` and never import an algorithm.
 """
-from selfnav.io.csvio import read_table, write_csv
-from selfnav.io.imu import ImuData, read_imu, read_imu_positions
-from selfnav.io.psins import read_psins_imu
-
-__all__ = ["read_table", "write_csv", "ImuData", "read_imu", "read_imu_positions", "read_psins_imu"]

@@ -18,7 +18,6 @@ circular). :func:`navigate_imu_attitude` runs the moving-base method on an IMU a
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
 
 import numba
 import numpy as np
@@ -27,23 +26,13 @@ from selfnav import attitude as att
 from selfnav.earth import OMEGA_EARTH
 from selfnav.errors import InputError
 from selfnav.io.csvio import check_time, read_table
+from selfnav.types import AttitudeData
 from selfnav.moving import (MovingBaseNavigator, _cumulative_rotation, _rodrigues,
                             coning_increments, gyro_increments)
 
 ATTITUDE_COLUMNS = ("t", "roll_deg", "pitch_deg", "heading_deg")
 
 
-@dataclass
-class AttitudeData:
-    """Attitude samples: ``t`` (N,) s and ``C_nb`` (N, 3, 3) nav ENU → body RFU."""
-
-    t: np.ndarray
-    C_nb: np.ndarray
-    source: str = ""
-    lines: np.ndarray | None = None
-
-    def __len__(self) -> int:
-        return len(self.t)
 
 
 def check_gaps(t, path, *, lines=None, factor=5.0, what="attitude"):

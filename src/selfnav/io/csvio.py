@@ -20,7 +20,7 @@ import numpy as np
 from selfnav.errors import InputError
 
 
-def _open_text(path: Path) -> str:
+def open_text(path: Path) -> str:
     try:
         raw = path.read_bytes()
     except FileNotFoundError:
@@ -82,7 +82,7 @@ def read_table(path, required, optional=(), *, numeric=True):
         ``"_lines"`` gives the 1-based file line number of each data row (indexable).
     """
     path = Path(path)
-    text = _open_text(path)
+    text = open_text(path)
     plain = path.suffix != ".gz" and not text.startswith("\ufeff") and "\r" not in text[:4096]
     pos, line_no = 0, 0
     header_line = None

@@ -4,61 +4,26 @@ from __future__ import annotations
 
 import calendar
 import datetime as _dt
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from selfnav import datum as dm
 from selfnav.errors import InputError
-from selfnav.io.csvio import _open_text, check_time, read_table
+from selfnav.io.csvio import check_time, open_text, read_table
+from selfnav.types import GnssData
 
 #: GPS time origin 1980-01-06 in Unix-like seconds; GPS week seconds are counted from a Sunday.
 GPS_EPOCH_UNIX = 315964800
 WEEK = 604800.0
 
 
-@dataclass
-class GnssData:
-    """GNSS fixes in WGS-84.
-
-    Attributes
-    ----------
-    t : (N,) s
-    lat, lon : (N,) rad
-    h : (N,) m, ellipsoidal
-    sigma_m : (N,) horizontal σ per axis, m (NaN: not given)
-    velocity_n : (N, 3) ENU m/s or None
-    quality : (N,) int or None (RTKLIB Q: 1 fix, 2 float, 5 single, ...)
-    source : str
-    """
-
-    t: np.ndarray
-    lat: np.ndarray
-    lon: np.ndarray
-    h: np.ndarray
-    sigma_m: np.ndarray | None = None
-    velocity_n: np.ndarray | None = None
-    quality: np.ndarray | None = None
-    source: str = ""
-
-    def __len__(self) -> int:
-        return len(self.t)
-
-    def select(self, mask) -> "GnssData":
-        def s(x):
-            return None if x is None else x[mask]
-        return GnssData(self.t[mask], self.lat[mask], self.lon[mask], self.h[mask], s(self.sigma_m),
-                        s(self.velocity_n), s(self.quality), self.source)
 
 
-def _to_wgs84(lat, lon, h, datum, path):
+def to_wgs84(lat, lon, h, datum, path):
     d = (datum or "wgs84").lower().replace("-", "").replace(".", "").replace("_", "")
     if d == "wgs84":
         return lat, lon, h
-    try:
-        from selfnav import datum as dm
-    except ImportError:  # pragma: no cover
-        raise InputError(path, f"datum '{datum}' needs selfnav.datum") from None
     out = dm.convert(lat, lon, h, d, "wgs84")
     return out[0], out[1], out[2]
 
@@ -83,7 +48,7 @@ def read_gnss_csv(path, datum: str = "wgs84") -> GnssData:
     vel = None
     if all(k in tab for k in ("ve", "vn", "vu")):
         vel = np.column_stack([tab["ve"], tab["vn"], tab["vu"]])
-    lat, lon, h = _to_wgs84(np.radians(lat_deg), np.radians(lon_deg), tab["h_m"], datum, path)
+    lat, lon, h = to_wgs84(np.radians(lat_deg), np.radians(lon_deg), tab["h_m"], datum, path)
     return GnssData(t, np.asarray(lat), np.asarray(lon), np.asarray(h), sig, vel, None, str(path))
 
 
@@ -99,7 +64,7 @@ def read_rtklib_pos(path) -> GnssData:
     when present, vn, ve, vu (m/s). Returns WGS-84 positions, σ = max(sdn, sde), ENU velocity.
     """
     path = Path(path)
-    text = _open_text(path)
+    text = open_text(path)
     rows, lines = [], []
     for i, ln in enumerate(text.splitlines()):
         s = ln.strip()
@@ -151,7 +116,7 @@ def read_nmea(path) -> GnssData:
     Fixes with quality 0 are dropped; σ from HDOP × 2.5 m when no better is known.
     """
     path = Path(path)
-    text = _open_text(path)
+    text = open_text(path)
     t, lat, lon, h, sig, q = [], [], [], [], [], []
     for i, ln in enumerate(text.splitlines()):
         s = ln.strip()
@@ -178,44 +143,3 @@ def read_nmea(path) -> GnssData:
     t = np.unwrap(np.asarray(t), period=86400.0)
     return GnssData(t, np.radians(lat), np.radians(lon), np.asarray(h), np.asarray(sig), None,
                     np.asarray(q), str(path))
-
-
-def _with_rmc_velocity(g: GnssData, path) -> GnssData:
-    """Add the horizontal velocity of RMC sentences (same time stamps) to GGA fixes."""
-    from selfnav.io.nmea_rmc import read_nmea_rmc
-
-    try:
-        rmc = read_nmea_rmc(path)
-    except InputError:
-        return g
-    if len(rmc.t) == 0:
-        return g
-    idx = np.searchsorted(rmc.t, g.t)
-    idx = np.clip(idx, 0, len(rmc.t) - 1)
-    same = np.abs(rmc.t[idx] - g.t) < 1e-3
-    if not np.all(same):
-        return g
-    v = rmc.velocity_n[idx].copy()
-    v[:, 2] = np.where(np.isfinite(v[:, 2]), v[:, 2], 0.0)
-    g.velocity_n = v
-    return g
-
-
-def read_gnss(path, fmt: str = "auto", datum: str = "wgs84") -> GnssData:
-    """Read GNSS fixes: ``csv`` (native), ``pos`` (RTKLIB), ``nmea``; ``auto`` by extension."""
-    p = Path(path)
-    if fmt == "auto":
-        ext = p.suffix.lower()
-        fmt = {".pos": "pos", ".nmea": "nmea", ".nma": "nmea", ".gga": "nmea"}.get(ext, "csv")
-    if fmt == "csv":
-        return read_gnss_csv(p, datum)
-    if fmt == "pos":
-        g = read_rtklib_pos(p)
-    elif fmt == "nmea":
-        g = read_nmea(p)
-        g = _with_rmc_velocity(g, p)
-    else:
-        raise InputError(p, f"unknown GNSS format '{fmt}' (use csv, pos or nmea)")
-    if datum.lower() != "wgs84":
-        g.lat, g.lon, g.h = _to_wgs84(g.lat, g.lon, g.h, datum, p)
-    return g

@@ -1,70 +1,15 @@
-"""IMU data container and the IMU readers (DESIGN §6: ``t, wx, wy, wz, fx, fy, fz``)."""
+"""The native IMU CSV reader (DESIGN §6: ``t, wx, wy, wz, fx, fy, fz``) and the unit checks
+every IMU reader applies."""
 from __future__ import annotations
-
-from dataclasses import dataclass, field
-from functools import cached_property
-from pathlib import Path
 
 import numpy as np
 
 from selfnav.earth import OMEGA_EARTH
 from selfnav.errors import InputError
 from selfnav.io.csvio import check_time, read_table
+from selfnav.types import ImuData
 
 IMU_COLUMNS = ("t", "wx", "wy", "wz", "fx", "fy", "fz")
-
-
-@dataclass
-class ImuData:
-    """IMU samples in the body RFU frame, SI units.
-
-    Attributes
-    ----------
-    t : (N,) float64
-        Time, s, strictly increasing. For increment formats, the end of each interval.
-    omega_ib_b : (N, 3)
-        Angular rate (mean over the sample interval for increment formats), rad/s.
-    f_ib_b : (N, 3)
-        Specific force, m/s^2.
-    mag_b : (N, 3) or None
-        Magnetometer, any unit.
-    position : (N,) int or None
-        Position index for multi-position records.
-    source : str
-        Where the data came from (file name, "simulated ...").
-    meta : dict
-        Format-specific header values (e.g. PSINS site and nominal g).
-    """
-
-    t: np.ndarray
-    omega_ib_b: np.ndarray
-    f_ib_b: np.ndarray
-    mag_b: np.ndarray | None = None
-    position: np.ndarray | None = None
-    source: str = ""
-    meta: dict = field(default_factory=dict)
-
-    def __len__(self) -> int:
-        return len(self.t)
-
-    @cached_property
-    def dt(self) -> float:
-        """Median sample interval, s (computed once)."""
-        return float(np.median(np.diff(self.t))) if len(self.t) > 1 else float("nan")
-
-    @property
-    def duration(self) -> float:
-        """Covered time span, s (N samples of interval dt)."""
-        return float(self.t[-1] - self.t[0] + self.dt) if len(self.t) > 1 else 0.0
-
-    def select(self, mask) -> "ImuData":
-        """A subset of the samples."""
-        return ImuData(
-            self.t[mask], self.omega_ib_b[mask], self.f_ib_b[mask],
-            None if self.mag_b is None else self.mag_b[mask],
-            None if self.position is None else self.position[mask],
-            self.source, dict(self.meta),
-        )
 
 
 def check_imu_units(imu: ImuData, path=None) -> None:
@@ -106,42 +51,6 @@ def read_imu_csv(path) -> ImuData:
     imu = ImuData(t, w, f, mag, pos, source=str(path))
     check_imu_units(imu, path)
     return imu
-
-
-def read_imu(path, fmt: str = "auto") -> ImuData:
-    """Read an IMU file.
-
-    Parameters
-    ----------
-    path : str or Path
-    fmt : {"auto", "csv", "psins"}
-        ``auto`` picks PSINS for ``.imu`` / ``.imu.gz`` names, CSV otherwise.
-    """
-    p = Path(path)
-    if fmt == "auto":
-        name = p.name.lower()
-        fmt = "psins" if name.endswith(".imu") or name.endswith(".imu.gz") else "csv"
-    if fmt == "csv":
-        return read_imu_csv(p)
-    if fmt == "psins":
-        from selfnav.io.psins import read_psins_imu
-
-        return read_psins_imu(p)
-    raise InputError(p, f"unknown IMU format '{fmt}' (use csv or psins)")
-
-
-def read_imu_positions(paths, fmt: str = "auto") -> ImuData:
-    """Read a multi-position record: several files (one per position) or one with ``position``."""
-    paths = list(paths)
-    if len(paths) == 1:
-        return read_imu(paths[0], fmt)
-    parts = [read_imu(p, fmt) for p in paths]
-    t = np.concatenate([p.t for p in parts])
-    pos = np.concatenate([np.full(len(p), k) for k, p in enumerate(parts)])
-    return ImuData(
-        t, np.concatenate([p.omega_ib_b for p in parts]), np.concatenate([p.f_ib_b for p in parts]),
-        None, pos, source=" + ".join(str(p) for p in paths),
-    )
 
 
 def earth_rate_ratio(imu: ImuData) -> float:

@@ -34,10 +34,10 @@ from pathlib import Path
 import numpy as np
 
 from selfnav.errors import InputError
-from selfnav.io.csvio import _open_text, atomic_path
-from selfnav.io.gnss import GnssData
-from selfnav.io.imu import ImuData
-from selfnav.simulate.trajectory import Trajectory
+from selfnav.io.csvio import open_text, atomic_path
+from selfnav.types import GnssData
+from selfnav.types import ImuData
+from selfnav.types import Trajectory
 
 WEEK = 604800.0
 #: FRD ↔ RFU and NED ↔ ENU axis permutation (symmetric, its own inverse, det +1)
@@ -91,7 +91,7 @@ def kfgins_euler(C_nb):
 def _numeric(path, min_cols: int, what: str) -> tuple[np.ndarray, np.ndarray]:
     """Whitespace/comma separated numbers → (rows, ≥min_cols) array and 1-based line numbers."""
     path = Path(path)
-    text = _open_text(path)
+    text = open_text(path)
     lines = text.splitlines()
     keep = [i for i, ln in enumerate(lines) if ln.strip() and not ln.lstrip().startswith("#")]
     if not keep:

@@ -27,8 +27,8 @@ from pathlib import Path
 import numpy as np
 
 from selfnav.errors import InputError
-from selfnav.io.csvio import _open_text
-from selfnav.io.gnss import GnssData
+from selfnav.io.csvio import open_text
+from selfnav.types import GnssData
 
 KNOT = 1852.0 / 3600.0  # m/s
 
@@ -127,7 +127,7 @@ def read_nmea_rmc(path) -> RmcData:
     right (or absent), and when no valid RMC fix is found.
     """
     path = Path(path)
-    text = _open_text(path)
+    text = open_text(path)
     rows, rejected = [], {}
     for i, ln in enumerate(text.splitlines()):
         s = ln.strip()

@@ -20,8 +20,9 @@ from pathlib import Path
 import numpy as np
 
 from selfnav.errors import InputError
-from selfnav.io.csvio import _open_text
-from selfnav.io.imu import ImuData, check_imu_units
+from selfnav.io.csvio import open_text
+from selfnav.io.imu import check_imu_units
+from selfnav.types import ImuData
 
 ARCSEC = np.pi / 180.0 / 3600.0
 
@@ -29,7 +30,7 @@ ARCSEC = np.pi / 180.0 / 3600.0
 def read_psins_imu(path) -> ImuData:
     """Read a PSINS compact SIMU ``.imu`` file (optionally gzip-compressed)."""
     path = Path(path)
-    text = _open_text(path)
+    text = open_text(path)
     lines = text.splitlines()
     body = [(i + 1, ln) for i, ln in enumerate(lines) if ln.strip() and not ln.lstrip().startswith("%")]
     if len(body) < 4:

@@ -15,8 +15,8 @@ import numpy as np
 
 from selfnav import attitude as att
 from selfnav.errors import InputError
-from selfnav.io.attitude_file import AttitudeData
-from selfnav.io.imu import ImuData
+from selfnav.types import AttitudeData
+from selfnav.types import ImuData
 
 
 def _load(path, ncol):

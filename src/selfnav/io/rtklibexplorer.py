@@ -21,7 +21,8 @@ import numpy as np
 from selfnav import attitude as att
 from selfnav.errors import InputError
 from selfnav.io.gnss import gps_seconds_of_week
-from selfnav.io.imu import ImuData, check_imu_units
+from selfnav.io.imu import check_imu_units
+from selfnav.types import ImuData
 
 G0 = 9.80665
 #: Upstream drive_config.py mounting angles of the drive_0708 roof mount, applied in RFU.

@@ -20,7 +20,7 @@ from scipy.integrate import cumulative_trapezoid
 
 from selfnav import attitude as att
 from selfnav.earth import normal_gravity, radii
-from selfnav.simulate.trajectory import Trajectory
+from selfnav.types import Trajectory
 
 
 def smoothstep(x):

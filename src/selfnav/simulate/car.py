@@ -10,7 +10,7 @@ parts (to ``simplify_tol``) and cuts a corner of turn angle θ by at most ``R (1
 
 The speed profile along ``s`` respects, at every point:
 
-* the road's speed (``maxspeed`` or the class default of :mod:`selfnav.roads`) and ``max_speed``;
+* the road's speed (``maxspeed`` or the class default of :mod:`selfnav.roads.graph`) and ``max_speed``;
 * the lateral acceleration limit ``v² |κ| <= lat_acc_max`` (slowing for corners);
 * ``|dv/dt| <= a_max`` (accelerating and braking), by a forward and a backward pass;
 * stops (``v = 0``, dwell 1–8 s) at randomly chosen junctions, at the start and at the end.
@@ -29,7 +29,7 @@ import numpy as np
 
 from selfnav import attitude as att
 from selfnav.errors import InputError
-from selfnav.simulate.trajectory import Trajectory
+from selfnav.types import Trajectory
 
 
 @dataclass
@@ -95,7 +95,7 @@ class CarRoute:
     path : CarPath
         The smoothed path actually driven (corner arcs).
     centerline : (M, 2) m
-        Dense samples of ``path`` (for :func:`selfnav.roads.project_to_polyline`).
+        Dense samples of ``path`` (for :func:`selfnav.roads.graph.project_to_polyline`).
     centerline_s : (M,) m
     s, speed, accel, curvature : (N,) per trajectory sample
         Arc length (m), speed (m/s), along-track acceleration (m/s²), curvature (1/m).
@@ -349,8 +349,8 @@ def car_route(graph, *, duration=600.0, dt=0.01, seed=None, route=None, max_spee
 
     Parameters
     ----------
-    graph : selfnav.roads.RoadGraph
-        Preferably strongly connected (the default of :func:`selfnav.roads.read_roads`).
+    graph : selfnav.roads.graph.RoadGraph
+        Preferably strongly connected (the default of :func:`selfnav.roads.graph.read_roads`).
     duration, dt : float
         Length and sample interval of the trajectory, s (the car may not have finished its
         route; it starts at rest).

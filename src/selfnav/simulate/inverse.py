@@ -3,7 +3,7 @@
 The trajectory samples are joined by smooth curves: a cubic spline of ``(φ, λ, h)`` and a cubic
 spline of the attitude quaternion (normalised on evaluation, so it is a rotation everywhere and
 passes through every sample). Along that continuous motion the sensors see, in the ENU
-mechanization of :mod:`selfnav.strapdown` (seed 004 (2), (4), (6)–(10))::
+mechanization of :mod:`selfnav.ins.strapdown` (seed 004 (2), (4), (6)–(10))::
 
     V_E = (R_λ) cos φ λ̇,   V_N = R_φ φ̇,   V_U = ḣ                      (R_φ, R_λ include h)
     ω_en^n = (-V_N/R_φ, V_E/R_λ, V_E tan φ / R_λ),   ω_ie^n = Ω (0, cos φ, sin φ)
@@ -23,8 +23,8 @@ from scipy.interpolate import CubicSpline
 
 from selfnav import attitude as att
 from selfnav.earth import WGS84, Ellipsoid, normal_gravity
-from selfnav.io.imu import ImuData
-from selfnav.simulate.trajectory import Trajectory
+from selfnav.types import ImuData
+from selfnav.types import Trajectory
 
 CHUNK = 65536
 

@@ -29,8 +29,8 @@ import numpy as np
 from selfnav import attitude as att
 from selfnav import sensors
 from selfnav.errors import InputError, SelfnavError
-from selfnav.io.imu import ImuData
-from selfnav.simulate.trajectory import Trajectory
+from selfnav.types import ImuData
+from selfnav.types import Trajectory
 
 BUILTIN = ("static", "multiposition", "ship", "aircraft", "car")
 
@@ -156,7 +156,7 @@ def _motion(cfg, rng_seed, progress):
 
         traj = aircraft_trajectory(T, dt, lat, lon, h, seed=rng_seed, **mo)
     else:  # car
-        from selfnav.roads import packaged_map, read_roads
+        from selfnav.roads.graph import packaged_map, read_roads
         from selfnav.simulate.car import car_route
 
         m = str(sc.get("map", "kotka_karhula"))
@@ -263,7 +263,7 @@ def write_simulation(sim: Simulation, out_dir) -> list[Path]:
     """Write ``imu.csv``, ``truth.csv``, ``gnss.csv``, ``gnss_errors.csv``, ``mag.csv`` and the
     map (DESIGN §6 columns), each with a ``# simulated ...`` comment line; returns the paths."""
     from selfnav.io.csvio import write_csv
-    from selfnav.simulate.trajectory import write_truth
+    from selfnav.io.trajectory import write_truth
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)

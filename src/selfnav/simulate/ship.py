@@ -14,7 +14,7 @@ import numpy as np
 
 from selfnav import attitude as att
 from selfnav.earth import OMEGA_EARTH, radii
-from selfnav.simulate.trajectory import Trajectory
+from selfnav.types import Trajectory
 
 
 def euler_rates_to_body(roll, pitch, roll_rate, pitch_rate, heading_rate):

@@ -11,7 +11,7 @@ import numpy as np
 
 from selfnav import attitude as att
 from selfnav.earth import earth_rate_n, normal_gravity
-from selfnav.io.imu import ImuData
+from selfnav.types import ImuData
 
 
 def _left_jacobian(a):

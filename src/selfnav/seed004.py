@@ -1,7 +1,7 @@
 """Seed 004 road-vehicle navigator: fast strapdown loop + slow map/GNSS loop, no optimal filter.
 
 Shcherban, Tolmachev, Konev (seed ``004_…``, §3; DESIGN §5). The *fast loop* is the strapdown
-mechanization (1)–(10) (:class:`selfnav.strapdown.Strapdown`, on the Krasovsky ellipsoid in
+mechanization (1)–(10) (:class:`selfnav.ins.strapdown.Strapdown`, on the Krasovsky ellipsoid in
 SK-42 as the seed has it) run for ``k_M`` steps of ``T0``; the *slow loop*, at each GNSS fix
 (``T_M = k_M T0``), does:
 
@@ -12,7 +12,7 @@ SK-42 as the seed has it) run for ``k_M`` steps of ``T0``; the *slow loop*, at e
 3. the mean speed ΔV (11) and predicted travel ``ΔS = T_M ΔV`` (13). **Erratum** (DESIGN §5):
    (11) prints ``T0·|n|``, the magnitude of specific force (gravity included); selfnav reads it
    as the mean fast-loop speed ``|V|`` over the period
-   (:func:`selfnav.strapdown.slow_period_speed`);
+   (:func:`selfnav.ins.strapdown.slow_period_speed`);
 4. the ``m`` road points in the neighbourhood of the prediction (road centre lines sampled every
    ``point_step`` m within ``radius`` of it);
 5. identification by minimising residuals over the INS prediction, the recent GNSS fixes
@@ -26,7 +26,7 @@ SK-42 as the seed has it) run for ``k_M`` steps of ``T0``; the *slow loop*, at e
 
 Gaps the seed leaves, filled and said so here:
 
-* the initial state: the in-motion alignment of the EKF (:func:`selfnav.ekf.init_from_gnss`)
+* the initial state: the in-motion alignment of the EKF (:func:`selfnav.ins.init_from_gnss`)
   over a 15-fix window, started after the first run of 20 healthy fixes (:func:`robust_init`;
   an outlier window at start-up must not seed the navigator hundreds of metres off), heading
   from the nearest road direction — the navigator starts there;
@@ -50,7 +50,7 @@ Gaps the seed leaves, filled and said so here:
   for the centripetal term, ``roll="keep"`` is the literal seed.
 
 ``matcher="mht"`` replaces step 5 by the road-constrained particle matcher of
-:mod:`selfnav.roadnav` (driven by the same ΔS and course); everything else stays.
+:mod:`selfnav.roads.particles` (driven by the same ΔS and course); everything else stays.
 """
 from __future__ import annotations
 
@@ -62,10 +62,11 @@ from selfnav import attitude as att
 from selfnav import datum as dm
 from selfnav.earth import KRASOVSKY, radii
 from selfnav.errors import SelfnavError
-from selfnav.roadnav import MatcherConfig, RoadParticles, _move, successor_table, wrap
-from selfnav.roads import RoadGraph
-from selfnav.simulate.trajectory import Trajectory
-from selfnav.strapdown import Strapdown
+from selfnav.roads.particles import MatcherConfig, RoadParticles, _move, successor_table, wrap
+from selfnav.roads.graph import RoadGraph
+from selfnav.types import Trajectory
+from selfnav.ins.align import healthy_start, robust_init
+from selfnav.ins.strapdown import Strapdown
 
 
 @dataclass
@@ -162,67 +163,6 @@ def _course_mean(mag_b, roll, pitch, declination):
     return float(np.arctan2(np.mean(np.sin(k)), np.mean(np.cos(k))) % (2 * np.pi))
 
 
-def healthy_start(t, xy, sigma, window=20):
-    """Index of the first fix of a run of ``window`` fixes that look healthy without an INS.
-
-    The second differences of the positions, ``z_k − 2 z_{k−1} + z_{k−2}`` (a constant-velocity
-    predictor), have a per-axis σ of ``√6 σ`` plus the change of velocity; their median length
-    over the run must stay below ``1.6 ×`` its nominal Rayleigh median and each below ``4 √6 σ``.
-    White 200 m outliers fail at once; drifting ones (Gauss-Markov, 200 m σ, τ 60 s: 36 m per
-    second) fail on the median. Returns None when no such run exists. ``t`` must be ~regular.
-    """
-    xy = np.asarray(xy, float)
-    n = len(xy)
-    if n < window + 2:
-        return None
-    d2 = np.hypot(*(xy[2:] - 2 * xy[1:-1] + xy[:-2]).T)     # d2[i] belongs to fix i + 2
-    s6 = np.sqrt(6.0) * np.asarray(sigma, float)[2:]
-    ok_each = d2 < 4.0 * s6
-    for k in range(0, n - 2 - window + 1):
-        seg = slice(k, k + window)
-        if ok_each[seg].all() and np.median(d2[seg]) < 1.6 * 1.18 * float(np.median(s6[seg])):
-            return k     # fixes k .. k + window + 1 are healthy
-    return None
-
-
-def robust_init(imu, gnss, graph=None, *, sigma=10.0, window=20):
-    """The in-motion alignment (:func:`selfnav.ekf.init_from_gnss`) started only after the first
-    run of healthy fixes (:func:`healthy_start`): an outlier window at start-up (seed 004: up
-    to 5 min, 200 m σ, white or drifting) must not seed the navigator hundreds of metres off.
-    ``gnss`` is WGS-84. With ``graph`` the heading is the nearest road direction and the
-    vertical velocity zero (seed (15) at the start)."""
-    from selfnav.ekf import FilterConfig, init_from_gnss
-    from selfnav.io.gnss import GnssData
-
-    sig = (np.asarray(gnss.sigma_m, float) if gnss.sigma_m is not None
-           else np.full(len(gnss.t), np.nan))
-    sig = np.where(np.isfinite(sig), sig, sigma)
-    from selfnav.earth import radii as _radii
-
-    lat0 = float(gnss.lat[0])
-    rm, rn = _radii(lat0, 0.0)
-    xy = np.column_stack([(gnss.lon - gnss.lon[0]) * rn * np.cos(lat0), (gnss.lat - lat0) * rm])
-    k = healthy_start(gnss.t, xy, sig, window)
-    if k is None:
-        raise SelfnavError(f"no run of {window} healthy GNSS fixes to start from (outliers "
-                           "throughout?)")
-    sub = slice(k, None)
-    g2 = GnssData(gnss.t[sub], gnss.lat[sub], gnss.lon[sub], gnss.h[sub], sig[sub],
-                  None if gnss.velocity_n is None else gnss.velocity_n[sub], None, "wgs84")
-    fc = FilterConfig.for_grade("consumer", window=15)
-    init = dict(init_from_gnss(imu, g2, fc, sig[sub]))
-    if graph is not None:
-        r0, _, k0 = att.euler_from_dcm_nb(init["C_nb"])
-        xi, yi = graph.to_local(init["lat"], init["lon"])
-        hd = graph.road_heading(np.array([[float(xi), float(yi)]]), float(k0))[0]
-        k0 = float(hd) if np.isfinite(hd) else float(k0)
-        v = np.asarray(init["velocity_n"], float)
-        sp = float(np.hypot(v[0], v[1]))
-        init["velocity_n"] = np.array([sp * np.sin(k0), sp * np.cos(k0), 0.0])
-        init["C_nb"] = att.dcm_nb_from_euler(float(r0), 0.0, k0)
-    return init
-
-
 def run_seed(imu, gnss, graph: RoadGraph, cfg: SeedConfig | None = None, *, gnss_datum="wgs84",
              init=None, progress=None) -> SeedResult:
     """Run the seed 004 navigator over a record.
@@ -238,7 +178,7 @@ def run_seed(imu, gnss, graph: RoadGraph, cfg: SeedConfig | None = None, *, gnss
     cfg : SeedConfig
     init : dict, optional
         Initial state (``t, lat, lon, h, velocity_n, C_nb``, WGS-84); default
-        :func:`selfnav.ekf.init_from_gnss`.
+        :func:`selfnav.ins.init_from_gnss`.
     """
     cfg = cfg or SeedConfig()
     if cfg.matcher not in ("seed", "mht"):
@@ -255,7 +195,7 @@ def run_seed(imu, gnss, graph: RoadGraph, cfg: SeedConfig | None = None, *, gnss
            else np.full(len(gnss.t), np.nan))
     sig = np.where(np.isfinite(sig), sig, cfg.sigma_gnss)
     if init is None:
-        from selfnav.io.gnss import GnssData
+        from selfnav.types import GnssData
 
         g84 = GnssData(gnss.t, glat, glon, gh, sig, gnss.velocity_n, None, "wgs84")
         init = robust_init(imu, g84, graph, sigma=cfg.sigma_gnss)
@@ -470,5 +410,5 @@ def run_seed(imu, gnss, graph: RoadGraph, cfg: SeedConfig | None = None, *, gnss
     return SeedResult(traj, diag, stats)
 
 
-__all__ = ["SeedConfig", "SeedResult", "run_seed", "robust_init", "healthy_start", "identify",
+__all__ = ["SeedConfig", "SeedResult", "run_seed", "identify",
            "road_points"]

@@ -1,8 +1,8 @@
 """The EKF's road aid (issue 5, ``--method ekf --map``): :class:`EkfRoadAid`.
 
-A :class:`~selfnav.roadnav.RoadParticles` cloud driven by the INS tells which road line the
+A :class:`~selfnav.roads.particles.RoadParticles` cloud driven by the INS tells which road line the
 vehicle is on; this class turns it into constraints for
-:meth:`selfnav.ekf.InsGnssFilter.update_road` — cross-track and road heading on straight roads,
+:meth:`selfnav.ins.ekf.InsGnssFilter.update_road` — cross-track and road heading on straight roads,
 the driven arc through corners — and a level-road prior. docs/navigator.md has the
 measurements.
 """
@@ -10,8 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from selfnav.roadnav import TWO_PI, MatcherConfig, RoadParticles, wrap
-from selfnav.roads import RoadGraph
+from selfnav.roads.particles import TWO_PI, MatcherConfig, RoadParticles, wrap
+from selfnav.roads.graph import RoadGraph
 
 
 def _heading_of(C_nb):
@@ -21,7 +21,7 @@ def _heading_of(C_nb):
 
 
 class EkfRoadAid:
-    """``road_aid`` for :func:`selfnav.ekf.run_filter` (``--method ekf --map``).
+    """``road_aid`` for :func:`selfnav.ins.run_filter` (``--method ekf --map``).
 
     At every aiding epoch the cloud travels the INS distance with the INS heading and takes the
     GNSS fixes that have arrived. Once per ``interval`` it returns a constraint for

@@ -1,6 +1,6 @@
 """Loosely coupled INS/GNSS error-state Kalman filter, RTS smoother and outlier defence (DESIGN §5, §7).
 
-The nominal state is carried by the strapdown mechanization (:class:`selfnav.strapdown.Strapdown`,
+The nominal state is carried by the strapdown mechanization (:class:`selfnav.ins.strapdown.Strapdown`,
 seed 004 fast loop); the filter estimates its errors
 
     δx = [δr (ENU, m), δv (ENU, m/s), ψ (rad), δb_g (rad/s), δb_a (m/s²)]        (15 states)
@@ -38,153 +38,18 @@ motion model instead of the INS) chooses the first trusted fixes.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-
 import numpy as np
 
 from selfnav import attitude as att
-from selfnav.earth import OMEGA_EARTH, WGS84, normal_gravity, radii
-from selfnav.errors import SelfnavError
-from selfnav.io.gnss import GnssData  # noqa: F401  (re-exported)
-from selfnav.simulate.trajectory import Trajectory
-from selfnav.strapdown import Strapdown
+from selfnav.attitude import rotvec_to_dcm3, skew3
+from selfnav.earth import OMEGA_EARTH, WGS84, enu_offset, normal_gravity, radii
+from selfnav.ins.config import CHI2_1_999, CHI2_2_999, CHI2_3_999, FilterConfig
+from selfnav.ins.strapdown import Strapdown
+from selfnav.types import Trajectory
 
 NX = 15
 IR, IV, IP, IBG, IBA = slice(0, 3), slice(3, 6), slice(6, 9), slice(9, 12), slice(12, 15)
 ISG, ISA = slice(15, 18), slice(18, 21)   # scale-factor errors (option)
-CHI2_3_999 = 16.266
-CHI2_2_999 = 13.816
-CHI2_1_999 = 10.828
-
-
-@dataclass
-class FilterConfig:
-    """Noise model and options of :class:`InsGnssFilter` (SI units).
-
-    Defaults suit a consumer/industrial MEMS IMU on a car; :meth:`for_grade` gives others.
-    """
-
-    arw: float = np.radians(0.3) / 60.0          # gyro white noise, rad/√s
-    vrw: float = 1e-3                            # accel white noise, (m/s)/√s
-    gyro_bias_sigma: float = np.radians(0.05)    # initial/steady gyro bias σ, rad/s
-    accel_bias_sigma: float = 0.05               # m/s²
-    gyro_bias_tau: float = np.inf                # s; inf: random constant + random walk
-    accel_bias_tau: float = np.inf
-    gyro_bias_instability: float = np.radians(10.0) / 3600.0   # steady-state GM σ, rad/s
-    accel_bias_instability: float = 5e-4                        # m/s²
-    instability_tau: float = 100.0               # correlation time of the bias instability, s
-    init_pos_sigma: float = 10.0
-    init_vel_sigma: float = 0.5
-    init_att_sigma: tuple = (np.radians(2.0), np.radians(2.0), np.radians(10.0))
-    lever_arm_b: np.ndarray = field(default_factory=lambda: np.zeros(3))   # IMU -> antenna, RFU
-    gnss_sigma_h: float | None = None            # override the file's sigma, m
-    gnss_sigma_v: float | None = None
-    gnss_sigma_floor: float = 0.1                # smallest σ believed: unmodelled timing, lever arm
-    use_gnss_velocity: bool = False
-    gnss_vel_sigma: float = 0.1
-    nhc: bool = True                             # non-holonomic constraint (wheeled vehicle)
-    nhc_sigma: float = 0.3                       # m/s, lateral and vertical body velocity
-    nhc_sigma_up: float | None = None            # m/s, vertical if it differs from lateral
-    zupt: bool = True
-    zupt_sigma: float = 0.02
-    zupt_speed: float = 1.0                      # the INS speed must be below this, m/s
-    zupt_speed_sigmas: float = 0.0               # … or below this many velocity σ (dead reckoning)
-    zupt_accel_h: float = 0.1                    # horizontal specific force below this, m/s²
-    zupt_gyro: float = np.radians(1.0)           # |ω - mean| threshold over a window, rad/s
-    zupt_accel: float = 0.15                     # std of |f| over the window, m/s²
-    cov_step: float = 0.2                        # covariance propagation sub-step, s
-    aid_step: float = 0.2                        # NHC / ZUPT update interval, s
-    robust: bool = True                          # window consistency test and dead reckoning
-    gate: float = CHI2_3_999                     # χ² gate on each fix (3 dof)
-    soft_gate: float = 10.0                      # with robust: up to soft_gate × gate, R inflated,
-    soft_gate_max_m: float = 3.0                 # … for innovations below this or 3σ only
-    degraded_window: float = 20.0                # s of suspect fixes to judge their noise
-    degraded_min: int = 15                       # at least this many fixes
-    window: int = 6                              # fixes in the consistency window
-    suspect_after: int = 2                       # consecutive rejections before suspect mode
-    max_accel: float = 5.0                       # start-up motion model, m/s²
-    dr_guard: bool = True                        # with robust: shadow dead reckoning (drguard)
-    dr_branch: float = 30.0                      # s between shadows
-    dr_max_age: float = 90.0                     # s a shadow lives while GNSS is trusted
-    dr_min_age: float = 5.0                      # s before a shadow tests fixes
-    dr_step: float = 1.0                         # s between shadow updates
-    dr_att_sigma: float = np.radians(0.5)        # branch only when every attitude σ is below
-    dr_sigma_scale: float = 2.0                  # shadow σ inflation (EKF dead reckoning is optimistic)
-    dr_gate: float = 18.421                      # χ²₂(0.9999) of a fix against a shadow
-    dr_fit_sigma: float = 0.5                    # m/s: re-acquire after a run this sure of its speed
-    dr_max_suspect: float = 330.0                # s after which any consistent run re-acquires
-    dr_reacq_run: float = 20.0                   # s of fixes moving like the dead reckoning that
-                                                 # re-acquire outside its uncertainty
-    min_init_speed: float = 5.0                  # heading from the GNSS course above this, m/s
-    vertical: str = "free"
-    scale_factors: bool = False                  # add gyro and accel scale-factor states (21)
-    mount_states: bool = False                   # estimate the IMU pitch/yaw to the vehicle (+2)
-    mount_rad: tuple = (0.0, 0.0)                # known (initial) mounting pitch, yaw, rad
-    mount_sigma: float = np.radians(2.0)         # its initial σ
-    nhc_lever_b: np.ndarray = field(default_factory=lambda: np.zeros(3))  # IMU -> rear axle, RFU
-    gyro_sf_sigma: float = 0.01
-    accel_sf_sigma: float = 0.01
-
-    @classmethod
-    def for_grade(cls, grade: str, **kw) -> "FilterConfig":
-        """Noise settings for a sensor grade (navigation, tactical, industrial, consumer)."""
-        g = grade.lower()
-        if g == "consumer-car":
-            # a consumer MEMS on a car roof (rtklibexplorer drive_0708): vibration and mounting
-            # raise the effective noise: VRW ×5, ARW ×3, bias instability ×10 over the
-            # datasheet-based consumer preset; the outage drift of that drive is then within
-            # its predicted 3σ (tests/test_ekf_realdata.py)
-            base = cls.for_grade("consumer")
-            d = dict(vrw=base.vrw * 5, arw=base.arw * 3,
-                     gyro_bias_instability=base.gyro_bias_instability * 10,
-                     accel_bias_instability=base.accel_bias_instability * 10,
-                     scale_factors=True)
-            d.update(kw)
-            return cls.for_grade("consumer", **d)
-        presets = {
-            "navigation": dict(arw=np.radians(0.002) / 60, vrw=5e-6, gyro_bias_sigma=np.radians(0.01) / 3600,
-                               accel_bias_sigma=5e-4, gyro_bias_instability=np.radians(0.003) / 3600,
-                               accel_bias_instability=1e-4, instability_tau=3600),
-            "tactical": dict(arw=np.radians(0.012) / 60, vrw=1.2e-3, gyro_bias_sigma=np.radians(2.0) / 3600,
-                             accel_bias_sigma=0.01, gyro_bias_instability=np.radians(0.05) / 3600,
-                             accel_bias_instability=5e-4, instability_tau=300),
-            "industrial": dict(arw=np.radians(0.15) / 60, vrw=2e-4, gyro_bias_sigma=np.radians(0.05),
-                               accel_bias_sigma=0.02, gyro_bias_instability=np.radians(2.0) / 3600,
-                               accel_bias_instability=1e-4, instability_tau=100),
-            # consumer MEMS: 1 % scale factors (BMI160 sheet) are estimated (21 states)
-            "consumer": dict(arw=np.radians(0.007), vrw=180e-6 * 9.80665, gyro_bias_sigma=np.radians(1.0),
-                             accel_bias_sigma=0.2, gyro_bias_instability=np.radians(10.0) / 3600,
-                             accel_bias_instability=5e-4, instability_tau=30, scale_factors=True,
-                             # a weaker NHC while the 1 °/s gyro biases leave the heading loose:
-                             # at 0.3 m/s it held a wrong heading on a simulated stop-and-go drive
-                             nhc_sigma=0.5),
-        }
-        if g not in presets:
-            raise SelfnavError(f"unknown grade '{grade}' (use {', '.join(presets)} or consumer-car)")
-        d = presets[g]
-        d.update(kw)
-        return cls(**d)
-
-
-def _skew(v):
-    """Skew matrix of one 3-vector (fast path of :func:`selfnav.attitude.skew`)."""
-    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
-
-
-def _rot(rv):
-    """``exp([rv])`` for one rotation vector (Rodrigues)."""
-    th2 = rv @ rv
-    K = _skew(rv)
-    if th2 < 1e-12:
-        return np.eye(3) + K + 0.5 * (K @ K)
-    th = np.sqrt(th2)
-    return np.eye(3) + np.sin(th) / th * K + (1.0 - np.cos(th)) / th2 * (K @ K)
-
-
-def _enu_offset(lat0, lon0, h0, lat, lon, h):
-    """ENU metres of (lat, lon, h) relative to (lat0, lon0, h0), small-offset form."""
-    rm, rn = radii(lat0, h0)
-    return np.array([(lon - lon0) * rn * np.cos(lat0), (lat - lat0) * rm, h - h0])
 
 
 class InsGnssFilter:
@@ -198,25 +63,25 @@ class InsGnssFilter:
         self.cfg = cfg
         self.ins = Strapdown(lat, lon, h, velocity_n, C_nb, t=t0, ellipsoid=ellipsoid,
                              vertical=cfg.vertical)
-        self.nx = 21 if cfg.scale_factors else NX
-        self.imt = slice(self.nx, self.nx + 2) if cfg.mount_states else None
-        self.nx += 2 if cfg.mount_states else 0
+        self.nx = 21 if cfg.states.scale_factors else NX
+        self.imt = slice(self.nx, self.nx + 2) if cfg.states.mount_states else None
+        self.nx += 2 if cfg.states.mount_states else 0
         self.bg = np.zeros(3)
         self.ba = np.zeros(3)
         self.sg = np.zeros(3)
         self.sa = np.zeros(3)
-        self.mu = np.array(cfg.mount_rad, dtype=float)   # IMU pitch, yaw relative to the vehicle
+        self.mu = np.array(cfg.states.mount_rad, dtype=float)   # IMU pitch, yaw relative to the vehicle
         P = np.zeros((self.nx, self.nx))
-        P[IR, IR] = np.eye(3) * cfg.init_pos_sigma**2
-        P[IV, IV] = np.eye(3) * cfg.init_vel_sigma**2
-        P[IP, IP] = np.diag(np.square(cfg.init_att_sigma))
-        P[IBG, IBG] = np.eye(3) * cfg.gyro_bias_sigma**2
-        P[IBA, IBA] = np.eye(3) * cfg.accel_bias_sigma**2
-        if cfg.scale_factors:
-            P[ISG, ISG] = np.eye(3) * cfg.gyro_sf_sigma**2
-            P[ISA, ISA] = np.eye(3) * cfg.accel_sf_sigma**2
-        if cfg.mount_states:
-            P[self.imt, self.imt] = np.eye(2) * cfg.mount_sigma**2
+        P[IR, IR] = np.eye(3) * cfg.init.pos_sigma**2
+        P[IV, IV] = np.eye(3) * cfg.init.vel_sigma**2
+        P[IP, IP] = np.diag(np.square(cfg.init.att_sigma))
+        P[IBG, IBG] = np.eye(3) * cfg.imu.gyro_bias_sigma**2
+        P[IBA, IBA] = np.eye(3) * cfg.imu.accel_bias_sigma**2
+        if cfg.states.scale_factors:
+            P[ISG, ISG] = np.eye(3) * cfg.imu.gyro_sf_sigma**2
+            P[ISA, ISA] = np.eye(3) * cfg.imu.accel_sf_sigma**2
+        if cfg.states.mount_states:
+            P[self.imt, self.imt] = np.eye(2) * cfg.states.mount_sigma**2
         self.P = P
         self._f_n = np.array([0.0, 0.0, 9.8])
         self._w_b = np.zeros(3)
@@ -237,18 +102,18 @@ class InsGnssFilter:
         C_bn = self.ins.C_nb.T
         F = np.zeros((self.nx, self.nx))
         F[0, 3] = F[1, 4] = F[2, 5] = 1.0
-        F[IV, IP] = _skew(f_n)
-        F[IV, IV] = -_skew(2 * w_ie + w_en)
+        F[IV, IP] = skew3(f_n)
+        F[IV, IV] = -skew3(2 * w_ie + w_en)
         F[IV, IBA] = -C_bn
         g = float(normal_gravity(lat, h))
         F[5, 2] = 2.0 * g / (np.sqrt(rm * rn))
-        F[IP, IP] = -_skew(w_ie + w_en)
+        F[IP, IP] = -skew3(w_ie + w_en)
         F[IP, IBG] = C_bn
-        if np.isfinite(cfg.gyro_bias_tau):
-            F[IBG, IBG] = -self._I3 / cfg.gyro_bias_tau
-        if np.isfinite(cfg.accel_bias_tau):
-            F[IBA, IBA] = -self._I3 / cfg.accel_bias_tau
-        if cfg.scale_factors:
+        if np.isfinite(cfg.imu.gyro_bias_tau):
+            F[IBG, IBG] = -self._I3 / cfg.imu.gyro_bias_tau
+        if np.isfinite(cfg.imu.accel_bias_tau):
+            F[IBA, IBA] = -self._I3 / cfg.imu.accel_bias_tau
+        if cfg.states.scale_factors:
             # corrected rate (ω̃ − b)/(1 + s): its error is −(δb + diag(ω) δs)
             F[IP, ISG] = C_bn * self._w_b[None, :]
             F[IV, ISA] = -C_bn * self._f_b[None, :]
@@ -257,17 +122,17 @@ class InsGnssFilter:
     def _Q(self, dt):
         cfg = self.cfg
         q = np.zeros(self.nx)
-        q[IV] = cfg.vrw**2
-        q[IP] = cfg.arw**2
-        q[IBG] = 2 * cfg.gyro_bias_instability**2 / cfg.instability_tau
-        q[IBA] = 2 * cfg.accel_bias_instability**2 / cfg.instability_tau
+        q[IV] = cfg.imu.vrw**2
+        q[IP] = cfg.imu.arw**2
+        q[IBG] = 2 * cfg.imu.gyro_bias_instability**2 / cfg.imu.instability_tau
+        q[IBA] = 2 * cfg.imu.accel_bias_instability**2 / cfg.imu.instability_tau
         return np.diag(q * dt)
 
     # ------------------------------------------------------------------ propagation
     def predict(self, t, dtheta, dv):
         """Mechanize a block of IMU increments (bias-corrected) and propagate the covariance.
 
-        Returns the block's :class:`~selfnav.simulate.trajectory.Trajectory`.
+        Returns the block's :class:`~selfnav.types.Trajectory`.
         """
         t = np.asarray(t, dtype=float)
         if len(t) == 0:
@@ -296,7 +161,7 @@ class InsGnssFilter:
         ins = self.ins
         lat, h = ins.lat, ins.h
         rm, rn = radii(lat, h)
-        C_bn = _rot(dx[IP]) @ ins.C_nb.T
+        C_bn = rotvec_to_dcm3(dx[IP]) @ ins.C_nb.T
         self._n_corr += 1
         if self._n_corr % 100 == 0:  # rotations keep it orthonormal; clean rounding now and then
             C_bn = att.orthonormalize(C_bn)
@@ -304,7 +169,7 @@ class InsGnssFilter:
                       h=h - dx[2], velocity_n=ins.velocity_n - dx[IV], C_nb=C_bn.T, check=False)
         self.bg -= dx[IBG]  # δb = estimated − true
         self.ba -= dx[IBA]
-        if self.cfg.scale_factors:
+        if self.cfg.states.scale_factors:
             self.sg -= dx[ISG]
             self.sa -= dx[ISA]
         if self.imt is not None:
@@ -323,12 +188,12 @@ class InsGnssFilter:
         """``h(x̃) − z`` in ENU metres and its H for a GNSS fix at the antenna."""
         ins = self.ins
         C_bn = ins.C_nb.T
-        l_n = C_bn @ self.cfg.lever_arm_b
-        z = _enu_offset(ins.lat, ins.lon, ins.h, lat, lon, h)
+        l_n = C_bn @ self.cfg.gnss.lever_arm_b
+        z = enu_offset(ins.lat, ins.lon, ins.h, lat, lon, h)
         r = l_n - z
         H = np.zeros((3, self.nx))
         H[:, IR] = np.eye(3)
-        H[:, IP] = _skew(l_n)
+        H[:, IP] = skew3(l_n)
         return r, H
 
     def update_position(self, lat, lon, h, sigma_h, sigma_v, *, gate=None):
@@ -365,21 +230,21 @@ class InsGnssFilter:
         v = self.ins.velocity_n
         vv = C_nb @ v
         C_vn = C_nb
-        lever = self.cfg.nhc_lever_b
+        lever = self.cfg.vehicle.nhc_lever_b
         if lever[0] or lever[1] or lever[2]:
-            vv = vv + _skew(self._w_b) @ lever
+            vv = vv + skew3(self._w_b) @ lever
         if self.imt is not None or self.mu[0] or self.mu[1]:
-            C_vb = _rot(np.array([self.mu[0], 0.0, self.mu[1]]))
+            C_vb = rotvec_to_dcm3(np.array([self.mu[0], 0.0, self.mu[1]]))
             C_vn = C_vb @ C_nb
             vv = C_vb @ vv
         H = np.zeros((2, self.nx))
         H[:, IV] = C_vn[[0, 2]]
-        H[:, IP] = -C_vn[[0, 2]] @ _skew(v)
+        H[:, IP] = -C_vn[[0, 2]] @ skew3(v)
         if self.imt is not None:
-            H[:, self.imt] = -_skew(vv)[[0, 2]][:, [0, 2]]
+            H[:, self.imt] = -skew3(vv)[[0, 2]][:, [0, 2]]
         cfg = self.cfg
-        s_up = cfg.nhc_sigma if cfg.nhc_sigma_up is None else cfg.nhc_sigma_up
-        R = np.diag([cfg.nhc_sigma**2, s_up**2])
+        s_up = cfg.vehicle.nhc_sigma if cfg.vehicle.nhc_sigma_up is None else cfg.vehicle.nhc_sigma_up
+        R = np.diag([cfg.vehicle.nhc_sigma**2, s_up**2])
         return self._kalman(vv[[0, 2]], H, R)
 
     def update_road(self, normal_n, offset, sigma, heading=None, sigma_heading=None):
@@ -421,7 +286,7 @@ class InsGnssFilter:
     def update_zupt(self):
         H = np.zeros((3, self.nx))
         H[:, IV] = np.eye(3)
-        return self._kalman(self.ins.velocity_n, H, np.eye(3) * self.cfg.zupt_sigma**2)
+        return self._kalman(self.ins.velocity_n, H, np.eye(3) * self.cfg.vehicle.zupt_sigma**2)
 
     def update_heading(self, heading, sigma):
         """True heading (rad), e.g. magnetic heading plus declination (seed 004 (12))."""
@@ -441,7 +306,7 @@ class InsGnssFilter:
 
 
 def _lever_arm_n(self):
-    return self.ins.C_nb.T @ self.cfg.lever_arm_b
+    return self.ins.C_nb.T @ self.cfg.gnss.lever_arm_b
 
 
 InsGnssFilter.lever_arm_n = _lever_arm_n
@@ -497,7 +362,7 @@ def _rts(states, P_plus, P_minus, Phi, updates, breaks=None):
     the propagated state at k+1 is what its update removed plus what the smoother adds).
 
     ``breaks[k]``: epoch k's state was *replaced* (a reset to a dead-reckoning shadow,
-    :mod:`selfnav.drguard`), not updated; nothing is carried back across it.
+    :mod:`selfnav.ins.guard`), not updated; nothing is carried back across it.
     """
     n = len(states)
     out = states.copy()
@@ -517,13 +382,4 @@ def _rts(states, P_plus, P_minus, Phi, updates, breaks=None):
     return out, Ps
 
 
-__all__ = ["FilterConfig", "InsGnssFilter", "GnssData"]
-
-# The batch and streaming drivers live in selfnav.insgnss (built on this module): resolved
-# lazily so that either module can be imported first.
-def __getattr__(name):
-    if name in ("FilterResult", "StreamingNavigator", "init_from_gnss", "run_filter"):
-        from selfnav import insgnss
-
-        return getattr(insgnss, name)
-    raise AttributeError(f"module 'selfnav.ekf' has no attribute '{name}'")
+__all__ = ["InsGnssFilter", "NX", "IR", "IV", "IP", "IBG", "IBA"]

@@ -2,7 +2,7 @@
 
 The record (PSINS ``transfer_align_fog_mems.mat``, 100 s of a car driving north) holds a
 low-cost MEMS IMU at 100 Hz and a fibre-optic INS (FOG-INS) navigating at 10 Hz beside it.
-There is no GNSS. This module runs :func:`selfnav.ekf.run_filter` on the MEMS increments with
+There is no GNSS. This module runs :func:`selfnav.ins.run_filter` on the MEMS increments with
 the **FOG-INS position, decimated to 1 Hz and given σ ≈ 1 m, as the "GNSS" aiding** (the
 only position source in the record), and measures the MEMS solution's attitude and velocity
 against the FOG-INS.
@@ -32,8 +32,8 @@ from pathlib import Path
 import numpy as np
 
 from selfnav import attitude as att
-from selfnav.ekf import FilterConfig, run_filter
-from selfnav.io.gnss import GnssData
+from selfnav.ins import FilterConfig, run_filter
+from selfnav.types import GnssData
 from selfnav.io.psins_mat import read_fog_mems
 
 DEG = np.pi / 180.0
@@ -47,7 +47,7 @@ def fog_gnss(data: dict, *, rate_hz: float = 1.0, sigma_m: float = 1.0, seed: in
     With ``noise=True`` white noise of that σ is added (seeded), to mimic a receiver; by
     default the FOG positions are used as they are (they are smooth, σ then only weights them).
     ``velocity=True`` also attaches the FOG ENU velocity (the upstream demo's velocity matching;
-    used by the filter with ``use_gnss_velocity=True``).
+    used by the filter with ``use_velocity=True``).
     """
     t = data["t_ref"]
     step = max(1, int(round(1.0 / (rate_hz * np.median(np.diff(t))))))
@@ -129,9 +129,9 @@ def default_config(**kw) -> FilterConfig:
     d = dict(arw=np.radians(0.1) / 60.0, vrw=0.01 / 60.0 * 10, gyro_bias_sigma=500 * DPH,
              accel_bias_sigma=10e-3 * 9.80665, gyro_bias_instability=10 * DPH,
              accel_bias_instability=1e-4, instability_tau=100.0, nhc=False, zupt=False,
-             robust=False, gnss_sigma_floor=0.1, aid_step=0.1)
+             robust=False, sigma_floor=0.1, aid_step=0.1)
     d.update(kw)
-    return FilterConfig(**d)
+    return FilterConfig().updated(**d)
 
 
 def _match(t_ref, t_sol):
@@ -155,10 +155,10 @@ def evaluate_fog_mems(folder, *, settle_s: float = 30.0, gnss_rate_hz: float = 1
     folder : path of the data set (``mimu.csv``, ``fogavp.csv``, ``.mat``)
     settle_s : errors are summarized after this many seconds from the start (convergence)
     gnss_rate_hz, gnss_sigma_m, gnss_noise, seed : the FOG-position aiding (:func:`fog_gnss`)
-    aid_velocity : also aid with the FOG velocity (σ ``gnss_vel_sigma``, default 0.1 m/s)
+    aid_velocity : also aid with the FOG velocity (σ ``velocity_sigma``, default 0.1 m/s)
     att_error_deg, vel_error : initial error added to the FOG state (:func:`initial_state`)
     smooth : run the RTS smoother
-    **cfg : overrides of :func:`default_config` (:class:`~selfnav.ekf.FilterConfig` fields)
+    **cfg : overrides of :func:`default_config` (:class:`~selfnav.ins.FilterConfig` fields)
 
     Returns
     -------
@@ -174,7 +174,7 @@ def evaluate_fog_mems(folder, *, settle_s: float = 30.0, gnss_rate_hz: float = 1
     gnss = fog_gnss(data, rate_hz=gnss_rate_hz, sigma_m=gnss_sigma_m, noise=gnss_noise, seed=seed,
                     velocity=aid_velocity)
     if aid_velocity:
-        cfg.setdefault("use_gnss_velocity", True)
+        cfg.setdefault("use_velocity", True)
     fc = default_config(**cfg)
     init = initial_state(data, att_error_deg, vel_error)
     res = run_filter(data["imu"], gnss, fc, init=init, smooth=smooth)

@@ -6,7 +6,7 @@
 heading measurements, in the order (time, kind). :func:`run_filter` is the batch call: it
 feeds a whole record through the same class, so both give identical results.
 
-The outlier defence (DESIGN §7; see :mod:`selfnav.ekf`): each fix passes a soft χ² gate
+The outlier defence (DESIGN §7; see :mod:`selfnav.ins.ekf`): each fix passes a soft χ² gate
 (up to ``soft_gate × gate`` with R inflated, Huber-like) *and* the window test: its
 displacement from the previous fix must agree with the INS displacement by propagation
 (``disp``; the corrections of updates are not motion). After ``suspect_after`` rejections the
@@ -20,13 +20,15 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from selfnav.align import _chi2_999, init_from_gnss  # noqa: F401  (re-exported)
-from selfnav.drguard import DeadReckoningGuard, track_agrees
-from selfnav.ekf import (IBG, IP, IR, IV, FilterConfig, InsGnssFilter, _enu_offset, _pack,
+from selfnav.earth import enu_offset
+from selfnav.ins.align import init_from_gnss
+from selfnav.ins.config import FilterConfig
+from selfnav.ins.guard import DeadReckoningGuard, track_agrees, white_scale, window_consistent
+from selfnav.ins.ekf import (IBG, IP, IR, IV, InsGnssFilter, _pack,
                          _rts, _unpack)
 from selfnav.errors import SelfnavError
-from selfnav.io.gnss import GnssData
-from selfnav.simulate.trajectory import Trajectory
+from selfnav.types import GnssData
+from selfnav.types import Trajectory
 
 @dataclass
 class FilterResult:
@@ -57,9 +59,9 @@ def _still(imu_w, imu_f, C_nb, cfg):
     if len(imu_w) < 3:
         return False
     f_n = C_nb.T @ imu_f.mean(0)
-    return (np.max(np.linalg.norm(imu_w, axis=1)) < cfg.zupt_gyro
-            and np.std(np.linalg.norm(imu_f, axis=1)) < cfg.zupt_accel
-            and np.hypot(f_n[0], f_n[1]) < cfg.zupt_accel_h)
+    return (np.max(np.linalg.norm(imu_w, axis=1)) < cfg.vehicle.zupt_gyro
+            and np.std(np.linalg.norm(imu_f, axis=1)) < cfg.vehicle.zupt_accel
+            and np.hypot(f_n[0], f_n[1]) < cfg.vehicle.zupt_accel_h)
 
 
 class _FixStore:
@@ -124,7 +126,7 @@ class StreamingNavigator:
         self.rejections = self.streak = self.degraded = self.reacq = 0
         self.sus, self.win = [], []
         self.disp = np.zeros(3)  # INS displacement by propagation only, ENU m
-        self.guard = DeadReckoningGuard(cfg) if (cfg.robust and cfg.dr_guard) else None
+        self.guard = DeadReckoningGuard(cfg) if (cfg.outliers.robust and cfg.shadows.use_shadows) else None
         self._block = None         # the last IMU block (t, dθ, dv) for the shadows
         self._still = False
         self._drag = None          # shadow that rejected a fix the filter accepted
@@ -136,9 +138,9 @@ class StreamingNavigator:
         """A fix (rad, rad, m; σ horizontal per axis, m). Returns its index."""
         cfg = self.cfg
         s = sigma_h if np.isfinite(sigma_h) else 5.0
-        if cfg.gnss_sigma_h is not None:
-            s = cfg.gnss_sigma_h
-        s = max(s, cfg.gnss_sigma_floor)
+        if cfg.gnss.sigma_h is not None:
+            s = cfg.gnss.sigma_h
+        s = max(s, cfg.gnss.sigma_floor)
         k = len(self.fixes.t)
         f = self.fixes
         f.t.append(float(t))
@@ -147,7 +149,7 @@ class StreamingNavigator:
         f.h.append(float(h))
         f.vel.append(None if velocity_n is None else np.asarray(velocity_n, dtype=float))
         self.sig_h.append(s)
-        self.sig_v.append(cfg.gnss_sigma_v if cfg.gnss_sigma_v is not None else 1.5 * s)
+        self.sig_v.append(cfg.gnss.sigma_v if cfg.gnss.sigma_v is not None else 1.5 * s)
         self.status.append(-1)
         self.innov.append(np.full(3, np.nan))
         self.nis.append(np.nan)
@@ -202,7 +204,7 @@ class StreamingNavigator:
             self._buf_dt.append(dt)
 
     def _next_event_time(self):
-        ta = self.t0 + self.cfg.aid_step * self._n_aid
+        ta = self.t0 + self.cfg.vehicle.aid_step * self._n_aid
         return min(ta, self._events[0][0]) if self._events else ta
 
     def finish(self):
@@ -229,7 +231,7 @@ class StreamingNavigator:
         p0 = (flt.ins.lat, flt.ins.lon, flt.ins.h)
         flt.predict(t, w * dt[:, None], f * dt[:, None])
         self._block = (t, w * dt[:, None], f * dt[:, None])
-        self.disp += _enu_offset(*p0, flt.ins.lat, flt.ins.lon, flt.ins.h)
+        self.disp += enu_offset(*p0, flt.ins.lat, flt.ins.lon, flt.ins.h)
         return w, f
 
     def _store(self, te, Pm, dx):
@@ -250,7 +252,7 @@ class StreamingNavigator:
         self._reset = False
 
     def _process_next(self):
-        ta = self.t0 + self.cfg.aid_step * self._n_aid
+        ta = self.t0 + self.cfg.vehicle.aid_step * self._n_aid
         if self._events and (self._events[0][0], self._events[0][1]) < (ta, 1):
             te, kind, _, k = heapq.heappop(self._events)
         else:
@@ -265,8 +267,8 @@ class StreamingNavigator:
         dx = np.zeros(flt.nx)
         if kind == 1:
             # still IMU *and* a slow INS: constant velocity also looks still to an IMU
-            v_max = max(cfg.zupt_speed, cfg.zupt_speed_sigmas * float(np.sqrt(flt.P[3, 3] + flt.P[4, 4])))
-            self._still = bool(cfg.zupt and np.linalg.norm(flt.ins.velocity_n) < v_max
+            v_max = max(cfg.vehicle.zupt_speed, cfg.vehicle.zupt_speed_sigmas * float(np.sqrt(flt.P[3, 3] + flt.P[4, 4])))
+            self._still = bool(cfg.vehicle.zupt and np.linalg.norm(flt.ins.velocity_n) < v_max
                                and _still(w_blk - flt.bg, f_blk - flt.ba, flt.ins.C_nb, cfg))
         if self.guard is not None and self._block is not None:
             self.guard.predict(*self._block, self._still)
@@ -274,7 +276,7 @@ class StreamingNavigator:
         if kind == 1:
             if self._still:
                 dx = flt.update_zupt()
-            elif cfg.nhc:
+            elif cfg.vehicle.nhc:
                 dx = flt.update_nhc()
             if self.road_aid is not None:
                 meas = self.road_aid(te, flt)
@@ -300,37 +302,37 @@ class StreamingNavigator:
         dx = np.zeros(flt.nx)
         # soft gate: a fix a little beyond the χ² gate is used with R inflated by NIS/gate
         # (Huber-like): real model errors are not Gaussian, outliers of 200 m are far beyond
-        soft = cfg.robust and np.hypot(r[0], r[1]) <= max(cfg.soft_gate_max_m, 3.0 * sh[k])
-        ok = nis <= cfg.gate * (cfg.soft_gate if soft else 1.0)
+        soft = cfg.outliers.robust and np.hypot(r[0], r[1]) <= max(cfg.outliers.soft_gate_max_m, 3.0 * sh[k])
+        ok = nis <= cfg.outliers.gate * (cfg.outliers.soft_gate if soft else 1.0)
         guard = self.guard
         shadow_rej = None if (guard is None or self.suspect) else guard.rejects(
-            fx.t[k], fx.lat[k], fx.lon[k], fx.h[k], sh[k], cfg.dr_sigma_scale)
-        if cfg.robust:
+            fx.t[k], fx.lat[k], fx.lon[k], fx.h[k], sh[k], cfg.shadows.sigma_scale)
+        if cfg.outliers.robust:
             # window test: displacements between fixes against the INS displacement, which stays
             # accurate when the absolute INS position has drifted (P cannot weaken it)
-            self.win = (self.win + [(k, self.disp.copy())])[-cfg.window:]
+            self.win = (self.win + [(k, self.disp.copy())])[-cfg.outliers.window:]
             s_vel = float(np.sqrt(np.trace(flt.P[IV, IV]) / 3.0)) + 0.2
             if self.suspect:
                 self.sus = [x for x in self.sus + [(fx.t[k], -r)]
-                            if x[0] > fx.t[k] - cfg.degraded_window]
-                win_ok = (len(self.win) >= cfg.window
-                          and _window_consistent(self.win, fx, sh, sv_, s_vel,
+                            if x[0] > fx.t[k] - cfg.outliers.degraded_window]
+                win_ok = (len(self.win) >= cfg.outliers.window
+                          and window_consistent(self.win, fx, sh, sv_, s_vel,
                                                  trend=self._guarded))
                 self.streak = self.streak + 1 if win_ok else 0
                 # no dead-reckoning reference when it went suspect, or an outage longer than
                 # any outlier episode: a self-consistent run is taken back as before the guard
-                long_out = not self._guarded or fx.t[k] - self._t_suspect > cfg.dr_max_suspect
+                long_out = not self._guarded or fx.t[k] - self._t_suspect > cfg.shadows.max_suspect
                 if win_ok and not long_out:
                     # a smooth drift is self-consistent too: it must also move like the dead
                     # reckoning and sit within its uncertainty (the gate) to be taken back
-                    run = self.sus[-(self.streak + cfg.window - 1):]
+                    run = self.sus[-(self.streak + cfg.outliers.window - 1):]
                     moves = track_agrees([x[0] for x in run], [x[1][:2] for x in run], sh[k],
-                                         flt.P[3:5, 3:5], cfg.dr_fit_sigma)
+                                         flt.P[3:5, 3:5], cfg.shadows.fit_sigma)
                     # outside the dead reckoning's uncertainty only after a long run that moves
                     # like it (the dead reckoning itself may be lost): a drift changes its rate
-                    long_run = moves and run[-1][0] - run[0][0] >= cfg.dr_reacq_run
+                    long_run = moves and run[-1][0] - run[0][0] >= cfg.shadows.reacq_run
                     win_ok = moves and (ok or long_run)
-                if win_ok and not ok and self.streak >= cfg.window:
+                if win_ok and not ok and self.streak >= cfg.outliers.window:
                     # a long run of self-consistent fixes that the dead reckoning cannot
                     # explain: its drift exceeded P; re-acquire by widening P to the offset
                     flt.P[IR, IR] += np.diag(r * r)
@@ -342,14 +344,14 @@ class StreamingNavigator:
                     # fix-to-fix differences (which cancel the slow dead-reckoning drift) against
                     # their scale about the median: equal for white noise, much smaller for a
                     # drifting (correlated) error, which is not used.
-                    s_eff = _white_scale(self.sus, cfg)
+                    s_eff = white_scale(self.sus, cfg)
                     if s_eff is not None and s_eff > 3.0 * sh[k]:
                         R_d = np.diag([s_eff**2, s_eff**2, (1.5 * s_eff) ** 2])
-                        if float(r @ np.linalg.solve(H @ flt.P @ H.T + R_d, r)) <= cfg.gate:
+                        if float(r @ np.linalg.solve(H @ flt.P @ H.T + R_d, r)) <= cfg.outliers.gate:
                             dx = flt._kalman(r, H, R_d)
                             self.degraded += 1
             elif len(self.win) > 1:
-                ok = ok and _window_consistent(self.win, fx, sh, sv_, s_vel)
+                ok = ok and window_consistent(self.win, fx, sh, sv_, s_vel)
             if not self.suspect and shadow_rej is not None:
                 # a fix the dead reckoning cannot explain; if the filter took it, it is
                 # being dragged (drguard)
@@ -357,7 +359,7 @@ class StreamingNavigator:
                 ok = False
         self.mode[k] = int(self.suspect)
         if ok:
-            dx = flt._kalman(r, H, R * max(1.0, nis / cfg.gate))
+            dx = flt._kalman(r, H, R * max(1.0, nis / cfg.outliers.gate))
             self.status[k] = 1
             self.rejections = self.streak = 0
             self.suspect = False
@@ -366,7 +368,7 @@ class StreamingNavigator:
         else:
             self.status[k] = 0
             self.rejections += 1
-            if cfg.robust and self.rejections >= cfg.suspect_after and not self.suspect:
+            if cfg.outliers.robust and self.rejections >= cfg.outliers.suspect_after and not self.suspect:
                 self.suspect = True
                 self._t_suspect = fx.t[k]
                 # the strict re-acquisition protects a converged filter with a dead-reckoning
@@ -375,15 +377,15 @@ class StreamingNavigator:
                 self._guarded = guard is not None and bool(guard.shadows_mature(fx.t[k]))
                 if guard is not None:
                     # dragged before the rejections began? back to the shadow it left
-                    drag = self._drag or guard.dragged(fx.t[k], flt, cfg.dr_sigma_scale)
+                    drag = self._drag or guard.dragged(fx.t[k], flt, cfg.shadows.sigma_scale)
                     if drag is not None and guard.reset_to(drag, flt):
                         self.win = []
                         self._reset = True
                     else:
                         self._widened = guard.widen(fx.t[k], flt)
                     self._drag = None
-        if ok and cfg.use_gnss_velocity and fx.vel[k] is not None:
-            dx = dx + flt.update_velocity(fx.vel[k], cfg.gnss_vel_sigma)
+        if ok and cfg.gnss.use_velocity and fx.vel[k] is not None:
+            dx = dx + flt.update_velocity(fx.vel[k], cfg.gnss.velocity_sigma)
         return dx
 
     # ------------------------------------------------------------------ output
@@ -410,7 +412,7 @@ class StreamingNavigator:
         return FilterResult(traj, sig[:, IR], sig[:, IV], sig[:, IP], bg, ba,
                             np.asarray(self.fixes.t), st, np.asarray(self.innov).reshape(-1, 3),
                             np.asarray(self.nis), np.asarray(self.mode, int), smoothed, stats,
-                            mount if self.cfg.mount_states else None)
+                            mount if self.cfg.states.mount_states else None)
 
 
 def run_filter(imu, gnss: GnssData, cfg: FilterConfig | None = None, *, init=None,
@@ -432,8 +434,8 @@ def run_filter(imu, gnss: GnssData, cfg: FilterConfig | None = None, *, init=Non
         Heading measurements (magnetometer + declination).
     road_aid : callable, optional
         Called at every aiding epoch as ``road_aid(t, flt)`` with the
-        :class:`~selfnav.ekf.InsGnssFilter`; returns ``None`` or a dict of
-        :meth:`~selfnav.ekf.InsGnssFilter.update_road` arguments (a map matcher that knows
+        :class:`~selfnav.ins.ekf.InsGnssFilter`; returns ``None`` or a dict of
+        :meth:`~selfnav.ins.ekf.InsGnssFilter.update_road` arguments (a map matcher that knows
         which road the vehicle is on).
     progress : callable(fraction), optional
     """
@@ -442,9 +444,9 @@ def run_filter(imu, gnss: GnssData, cfg: FilterConfig | None = None, *, init=Non
     sig_file = gnss.sigma_m if gnss.sigma_m is not None else np.full(n, np.nan)
     if init is None:
         s = np.where(np.isfinite(sig_file), sig_file, 5.0)
-        if cfg.gnss_sigma_h is not None:
-            s = np.full(n, cfg.gnss_sigma_h)
-        init = init_from_gnss(imu, gnss, cfg, np.maximum(s, cfg.gnss_sigma_floor))
+        if cfg.gnss.sigma_h is not None:
+            s = np.full(n, cfg.gnss.sigma_h)
+        init = init_from_gnss(imu, gnss, cfg, np.maximum(s, cfg.gnss.sigma_floor))
     nav = StreamingNavigator(cfg, init, road_aid=road_aid)
     for k in range(n):
         nav.add_gnss(gnss.t[k], gnss.lat[k], gnss.lon[k], gnss.h[k], sig_file[k],
@@ -459,61 +461,3 @@ def run_filter(imu, gnss: GnssData, cfg: FilterConfig | None = None, *, init=Non
             progress((c + 1) / len(chunks))
     nav.finish()
     return nav.result(smooth)
-
-
-def _white_scale(sus, cfg):
-    """Robust per-axis scale of suspect innovations if they look white, else None.
-
-    Innovations (fix minus INS) over the last ``degraded_window`` seconds, each axis detrended
-    by a straight line (the dead-reckoning drift is slow). White errors: lag-1 autocorrelation
-    near zero and the scale from fix-to-fix differences (÷√2) equal to the scale about the
-    line. A drifting (Gauss–Markov) error is strongly autocorrelated: its fixes are not used.
-    """
-    if len(sus) < cfg.degraded_min:
-        return None
-    t = np.array([x[0] for x in sus])
-    v = np.array([x[1][:2] for x in sus])
-    A = np.column_stack([np.ones(len(t)), t - t.mean()])
-    res = v - A @ np.linalg.lstsq(A, v, rcond=None)[0]
-    rho = np.sum(res[1:] * res[:-1], axis=0) / np.maximum(np.sum(res * res, axis=0), 1e-300)
-    s_diff = 1.4826 * np.median(np.abs(np.diff(res, axis=0))) / np.sqrt(2.0)
-    s_level = 1.4826 * np.median(np.abs(res - np.median(res, axis=0)))
-    if s_level <= 0 or np.max(rho) > 0.3 or s_diff < 0.8 * s_level:
-        return None
-    return float(max(s_diff, s_level))
-
-
-def _window_consistent(buf, gnss, sig_h, sig_v, sv, trend=False):
-    """The fixes of the window share one offset from the INS displacement (χ², 0.999).
-
-    ``d_i = z_i − (INS displacement)_i`` is the same for every fix of a healthy window (the INS
-    drift over a few seconds is ``sv·Δt``); the test is ``Σ |d_i − d̄|²/σ_i² ≤ χ²(3(W−1))``.
-    Stronger than pairwise tests against errors that wander between fixes (Gauss–Markov
-    outliers), and P cannot weaken it. ``trend=True`` fits an offset *and a rate* (the
-    velocity error of a long dead reckoning, which its covariance may understate; the rate is
-    then judged by :func:`selfnav.drguard.track_agrees`): ``χ²(3(W−2))``.
-    """
-    if len(buf) < 2:
-        return True
-    k0, s0 = buf[0]
-    d, var = [], []
-    tm = np.mean([gnss.t[k] for k, _ in buf])
-    for k, snap in buf:
-        z = _enu_offset(gnss.lat[k0], gnss.lon[k0], gnss.h[k0], gnss.lat[k], gnss.lon[k], gnss.h[k])
-        d.append(z - (snap - s0))
-        drift2 = (sv * (gnss.t[k] - tm)) ** 2
-        var.append([sig_h[k] ** 2 + drift2, sig_h[k] ** 2 + drift2, sig_v[k] ** 2 + drift2])
-    d, var = np.array(d), np.array(var)
-    w = 1.0 / var
-    if trend and len(buf) > 2:
-        t = np.array([gnss.t[k] for k, _ in buf]) - tm
-        A = np.column_stack([np.ones(len(t)), t])
-        res = np.empty_like(d)
-        for j in range(3):
-            sw = np.sqrt(w[:, j])
-            coef = np.linalg.lstsq(A * sw[:, None], d[:, j] * sw, rcond=None)[0]
-            res[:, j] = d[:, j] - A @ coef
-        return float(np.sum(res**2 * w)) <= _chi2_999(3 * (len(buf) - 2))
-    mean = np.sum(d * w, axis=0) / np.sum(w, axis=0)
-    chi2 = float(np.sum((d - mean) ** 2 * w))
-    return chi2 <= _chi2_999(3 * (len(buf) - 1))

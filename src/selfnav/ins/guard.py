@@ -20,7 +20,7 @@ shadows, branched from the dragged filter, are dropped), or else its covariance 
 its difference from the youngest shadow. While suspect, shadows are neither branched nor
 retired, and a run of fixes is taken back only when it is within the dead reckoning's
 uncertainty *and* its offset from the dead reckoning stops moving (:func:`track_agrees`) — a
-smooth drift is self-consistent, but it moves at its own speed (:mod:`selfnav.insgnss`).
+smooth drift is self-consistent, but it moves at its own speed (:mod:`selfnav.ins.navigator`).
 
 The shadows are cheaper than the filter: they are propagated and constrained once per
 ``dr_step`` (the NHC then weighs as much per second as the filter's five-per-second updates
@@ -33,13 +33,13 @@ import dataclasses
 
 import numpy as np
 
-from selfnav.ekf import IR, IV, _enu_offset
-
-CHI2_2_9999 = 18.421
+from selfnav.earth import enu_offset
+from selfnav.ins.config import CHI2_2_9999, chi2_999
+from selfnav.ins.ekf import IR, IV
 
 
 def clone_filter(flt):
-    """An independent copy of an :class:`~selfnav.ekf.InsGnssFilter` (state, P, biases)."""
+    """An independent copy of an :class:`~selfnav.ins.ekf.InsGnssFilter` (state, P, biases)."""
     out = copy.copy(flt)
     out.ins = copy.deepcopy(flt.ins)
     for name in ("P", "bg", "ba", "sg", "sa", "mu", "_f_n", "_w_b", "_f_b"):
@@ -50,7 +50,7 @@ def clone_filter(flt):
 
 def _difference(sh, flt):
     """Position (ENU m) and velocity of ``flt`` less those of shadow ``sh``."""
-    d = _enu_offset(sh.ins.lat, sh.ins.lon, sh.ins.h, flt.ins.lat, flt.ins.lon, flt.ins.h)
+    d = enu_offset(sh.ins.lat, sh.ins.lon, sh.ins.h, flt.ins.lat, flt.ins.lon, flt.ins.h)
     return d, flt.ins.velocity_n - sh.ins.velocity_n
 
 
@@ -82,15 +82,15 @@ class DeadReckoningGuard:
             return
         # a shadow of an unconverged filter (just after the in-motion alignment) would
         # dead-reckon worse than its covariance says: branch only once the attitude is known
-        converged = float(np.max(np.diag(flt.P)[6:9])) < cfg.dr_att_sigma**2
+        converged = float(np.max(np.diag(flt.P)[6:9])) < cfg.shadows.branch_att_sigma**2
         if trusted and converged:
-            if not self.shadows or t - self.shadows[-1][0] >= cfg.dr_branch - 1e-9:
+            if not self.shadows or t - self.shadows[-1][0] >= cfg.shadows.branch_every - 1e-9:
                 self._flush()
                 sh = clone_filter(flt)
                 # one covariance step per shadow step: a dead-reckoning σ needs no finer grid
-                sh.cfg = dataclasses.replace(flt.cfg, cov_step=max(cfg.cov_step, cfg.dr_step))
+                sh.cfg = dataclasses.replace(flt.cfg, cov_step=max(cfg.cov_step, cfg.shadows.step))
                 self.shadows.append([t, sh])
-            while len(self.shadows) > 1 and t - self.shadows[0][0] > cfg.dr_max_age:
+            while len(self.shadows) > 1 and t - self.shadows[0][0] > cfg.shadows.max_age:
                 self.shadows.pop(0)
 
     def predict(self, t, dtheta, dv, still):
@@ -98,7 +98,7 @@ class DeadReckoningGuard:
         if not self.shadows:
             return
         self._buf.append((t, dtheta, dv, still))
-        if t[-1] - self._t_step >= self.cfg.dr_step - 1e-9:
+        if t[-1] - self._t_step >= self.cfg.shadows.step - 1e-9:
             self._flush()
 
     def _flush(self):
@@ -115,16 +115,16 @@ class DeadReckoningGuard:
                 continue
             k = t > sh.ins.t
             sh.predict(t[k], dth[k], dv[k])
-            if still and self.cfg.zupt:
+            if still and self.cfg.vehicle.zupt:
                 sh.update_zupt()
-            elif self.cfg.nhc:
+            elif self.cfg.vehicle.nhc:
                 sh.update_nhc()
             sh.take_transition()
 
     # ------------------------------------------------------------------ tests
     def _mature(self, t):
         """The ``[t_branch, filter]`` entries old enough to test, oldest first."""
-        return [e for e in self.shadows if t - e[0] >= self.cfg.dr_min_age]
+        return [e for e in self.shadows if t - e[0] >= self.cfg.shadows.min_age]
 
     def shadows_mature(self, t):
         """The number of shadows old enough to test fixes."""
@@ -140,7 +140,7 @@ class DeadReckoningGuard:
         for e in self._mature(t):
             r, H = e[1].position_residual(lat, lon, h)
             S = (H @ e[1].P @ H.T)[:2, :2] * scale**2 + np.eye(2) * sigma_h**2
-            if float(r[:2] @ np.linalg.solve(S, r[:2])) > self.cfg.dr_gate:
+            if float(r[:2] @ np.linalg.solve(S, r[:2])) > self.cfg.shadows.shadow_gate:
                 return e
         return None
 
@@ -155,7 +155,7 @@ class DeadReckoningGuard:
             d, dv = _difference(sh, flt)
             for r, idx in ((d[:2], slice(0, 2)), (dv[:2], slice(3, 5))):
                 S = sh.P[idx, idx] * scale**2 + flt.P[idx, idx]
-                if float(r @ np.linalg.solve(S, r)) > self.cfg.dr_gate:
+                if float(r @ np.linalg.solve(S, r)) > self.cfg.shadows.shadow_gate:
                     return e
         return None
 
@@ -224,3 +224,61 @@ def track_agrees(t, innov_xy, sig, P_vv, max_fit_sigma=0.5, gate=CHI2_2_9999):
 
 
 __all__ = ["DeadReckoningGuard", "clone_filter", "track_agrees", "IR", "IV"]
+
+
+def white_scale(sus, cfg):
+    """Robust per-axis scale of suspect innovations if they look white, else None.
+
+    Innovations (fix minus INS) over the last ``degraded_window`` seconds, each axis detrended
+    by a straight line (the dead-reckoning drift is slow). White errors: lag-1 autocorrelation
+    near zero and the scale from fix-to-fix differences (÷√2) equal to the scale about the
+    line. A drifting (Gauss–Markov) error is strongly autocorrelated: its fixes are not used.
+    """
+    if len(sus) < cfg.outliers.degraded_min:
+        return None
+    t = np.array([x[0] for x in sus])
+    v = np.array([x[1][:2] for x in sus])
+    A = np.column_stack([np.ones(len(t)), t - t.mean()])
+    res = v - A @ np.linalg.lstsq(A, v, rcond=None)[0]
+    rho = np.sum(res[1:] * res[:-1], axis=0) / np.maximum(np.sum(res * res, axis=0), 1e-300)
+    s_diff = 1.4826 * np.median(np.abs(np.diff(res, axis=0))) / np.sqrt(2.0)
+    s_level = 1.4826 * np.median(np.abs(res - np.median(res, axis=0)))
+    if s_level <= 0 or np.max(rho) > 0.3 or s_diff < 0.8 * s_level:
+        return None
+    return float(max(s_diff, s_level))
+
+
+def window_consistent(buf, gnss, sig_h, sig_v, sv, trend=False):
+    """The fixes of the window share one offset from the INS displacement (χ², 0.999).
+
+    ``d_i = z_i − (INS displacement)_i`` is the same for every fix of a healthy window (the INS
+    drift over a few seconds is ``sv·Δt``); the test is ``Σ |d_i − d̄|²/σ_i² ≤ χ²(3(W−1))``.
+    Stronger than pairwise tests against errors that wander between fixes (Gauss–Markov
+    outliers), and P cannot weaken it. ``trend=True`` fits an offset *and a rate* (the
+    velocity error of a long dead reckoning, which its covariance may understate; the rate is
+    then judged by :func:`selfnav.ins.guard.track_agrees`): ``χ²(3(W−2))``.
+    """
+    if len(buf) < 2:
+        return True
+    k0, s0 = buf[0]
+    d, var = [], []
+    tm = np.mean([gnss.t[k] for k, _ in buf])
+    for k, snap in buf:
+        z = enu_offset(gnss.lat[k0], gnss.lon[k0], gnss.h[k0], gnss.lat[k], gnss.lon[k], gnss.h[k])
+        d.append(z - (snap - s0))
+        drift2 = (sv * (gnss.t[k] - tm)) ** 2
+        var.append([sig_h[k] ** 2 + drift2, sig_h[k] ** 2 + drift2, sig_v[k] ** 2 + drift2])
+    d, var = np.array(d), np.array(var)
+    w = 1.0 / var
+    if trend and len(buf) > 2:
+        t = np.array([gnss.t[k] for k, _ in buf]) - tm
+        A = np.column_stack([np.ones(len(t)), t])
+        res = np.empty_like(d)
+        for j in range(3):
+            sw = np.sqrt(w[:, j])
+            coef = np.linalg.lstsq(A * sw[:, None], d[:, j] * sw, rcond=None)[0]
+            res[:, j] = d[:, j] - A @ coef
+        return float(np.sum(res**2 * w)) <= chi2_999(3 * (len(buf) - 2))
+    mean = np.sum(d * w, axis=0) / np.sum(w, axis=0)
+    chi2 = float(np.sum((d - mean) ** 2 * w))
+    return chi2 <= chi2_999(3 * (len(buf) - 1))

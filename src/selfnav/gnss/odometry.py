@@ -1,5 +1,5 @@
 """2-D navigation from a car's speed and yaw rate, aided by position fixes that contain
-unflagged outliers (DESIGN §7 "Outliers"; the same defence as :mod:`selfnav.ekf`).
+unflagged outliers (DESIGN §7 "Outliers"; the same defence as :mod:`selfnav.ins.ekf`).
 
 State (local ENU tangent plane at ``origin``)::
 
@@ -41,7 +41,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from selfnav.earth import ecef_to_geodetic, geodetic_to_ecef
+from selfnav.earth import ecef_to_enu, enu_to_geodetic
 from selfnav.errors import SelfnavError
 
 CHI2_2_999 = 13.816
@@ -96,26 +96,6 @@ class OdoResult:
     mode: np.ndarray
     smoothed: bool
     stats: dict = field(default_factory=dict)
-
-
-def tangent_plane(lat0, lon0, h0):
-    """(C_e^n, r0_ecef) of the ENU tangent plane at a point."""
-    sl, cl, so, co = np.sin(lat0), np.cos(lat0), np.sin(lon0), np.cos(lon0)
-    C = np.array([[-so, co, 0.0], [-sl * co, -sl * so, cl], [cl * co, cl * so, sl]])
-    return C, geodetic_to_ecef(lat0, lon0, h0)
-
-
-def ecef_to_plane(ecef, origin):
-    """ECEF (N, 3) to tangent-plane ENU (N, 3) at ``origin = (lat0, lon0, h0)``."""
-    C, r0 = tangent_plane(*origin)
-    return (np.asarray(ecef, float) - r0) @ C.T
-
-
-def plane_to_geodetic(east, north, origin, up=0.0):
-    """Tangent-plane E, N (, U) back to WGS-84 (lat, lon, h)."""
-    C, r0 = tangent_plane(*origin)
-    enu = np.column_stack(np.broadcast_arrays(east, north, up))
-    return ecef_to_geodetic(r0 + enu @ C)
 
 
 def propagate(x, v, w, dt):
@@ -361,7 +341,7 @@ def rts_smooth(x_plus, P_plus, x_minus, P_minus, F):
 
 def _to_result(t, out, origin):
     x, P = out["x"], out["P"]
-    lat, lon, _ = plane_to_geodetic(x[:, IE], x[:, IN], origin)
+    lat, lon, _ = enu_to_geodetic(np.column_stack([x[:, IE], x[:, IN], np.zeros(len(x))]), *origin)
     sig = np.sqrt(np.maximum(np.stack([P[:, IE, IE], P[:, IN, IN]], axis=1), 0.0))
     return OdoResult(t, x[:, IE], x[:, IN], x[:, IH], x[:, IS], x[:, IB], sig, lat, lon,
                      out["fix_status"], out["nis"], out["mode"], out["smoothed"], out["stats"])
@@ -387,7 +367,7 @@ def run_smartloc(folder, *, spp_cfg=None, odo_cfg: OdoConfig | None = None,
     from dataclasses import replace
 
     from selfnav.io.smartloc import find_smartloc_files, read_smartloc_input, read_smartloc_truth
-    from selfnav.spp import SppConfig, spp_from_pseudoranges
+    from selfnav.gnss.spp import SppConfig, spp_from_pseudoranges
 
     t_start = time.perf_counter()
     inp, gt = find_smartloc_files(folder)
@@ -402,8 +382,8 @@ def run_smartloc(folder, *, spp_cfg=None, odo_cfg: OdoConfig | None = None,
     ok = sp.valid
     i0 = int(np.flatnonzero(ok)[0])
     origin = (sp.lat[i0], sp.lon[i0], sp.h[i0])
-    z = ecef_to_plane(sp.ecef, origin)[:, :2]
-    gt_en = ecef_to_plane(truth.ecef, origin)[:, :2]
+    z = ecef_to_enu(sp.ecef, *origin)[:, :2]
+    gt_en = ecef_to_enu(truth.ecef, *origin)[:, :2]
 
     def truth_at(tq):
         return np.column_stack([np.interp(tq, truth.t, gt_en[:, j]) for j in range(2)])

@@ -41,9 +41,9 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.stats import chi2
 
-from selfnav.earth import OMEGA_EARTH, WGS84, ecef_to_geodetic
+from selfnav.earth import OMEGA_EARTH, WGS84, ecef_to_geodetic, enu_rotation
 from selfnav.errors import SelfnavError
-from selfnav.io.gnss import GnssData
+from selfnav.types import GnssData
 
 C_LIGHT = 299_792_458.0
 
@@ -160,14 +160,6 @@ def sagnac_rotate(sat_ecef, rx_ecef):
     out[..., 1] = -s * sat_ecef[..., 0] + c * sat_ecef[..., 1]
     out[..., 2] = sat_ecef[..., 2]
     return out
-
-
-def ecef_to_enu_matrices(lat, lon):
-    """``C_e^n`` (ECEF -> ENU, rows E, N, U) for arrays of positions, shape (E, 3, 3)."""
-    lat, lon = np.atleast_1d(lat), np.atleast_1d(lon)
-    sl, cl, so, co = np.sin(lat), np.cos(lat), np.sin(lon), np.cos(lon)
-    return np.stack([np.stack([-so, co, 0 * so], -1), np.stack([-sl * co, -sl * so, cl], -1),
-                     np.stack([cl * co, cl * so, sl], -1)], axis=1)
 
 
 def _pad(epoch, n_epochs, *arrays):
@@ -344,7 +336,7 @@ def solve_spp(t, pr, var, sat_ecef, system, elevation=None, cn0=None,
     pos = np.where(solvable[:, None], x[:, :3], np.nan)
     lat, lon, h = ecef_to_geodetic(pos)
     # covariance to ENU: C_e^n P C_e^nᵀ per epoch
-    Cen = ecef_to_enu_matrices(lat, lon)
+    Cen = enu_rotation(np.atleast_1d(lat), np.atleast_1d(lon))
     P_enu = np.einsum("eij,ejk,elk->eil", Cen, Ninv[:, :3, :3], Cen)
     sig = np.sqrt(np.maximum(np.diagonal(P_enu, axis1=1, axis2=2), 0.0))
     sig[~solvable] = np.nan
@@ -375,5 +367,5 @@ def horizontal_error(result: SppResult, t_truth, ecef_truth):
     tr = np.column_stack([np.interp(result.t, t_truth, ecef_truth[:, i]) for i in range(3)])
     d = result.ecef - tr
     lat, lon, _ = ecef_to_geodetic(tr)
-    e = np.einsum("eij,ej->ei", ecef_to_enu_matrices(lat, lon), d)
+    e = np.einsum("eij,ej->ei", enu_rotation(np.atleast_1d(lat), np.atleast_1d(lon)), d)
     return np.hypot(e[:, 0], e[:, 1])

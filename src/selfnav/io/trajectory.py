@@ -1,47 +1,16 @@
-"""The trajectory every simulator produces and every evaluator reads (DESIGN §6 truth file)."""
+"""Truth and solution files (DESIGN §6): ``t, lat_deg, lon_deg, h_m`` and, where known,
+``ve, vn, vu, roll_deg, pitch_deg, heading_deg``."""
 from __future__ import annotations
-
-from dataclasses import dataclass
 
 import numpy as np
 
 from selfnav import attitude as att
 from selfnav.errors import InputError
 from selfnav.io.csvio import check_time, read_table, write_csv
+from selfnav.types import Trajectory
 
 TRUTH_COLUMNS = ("t", "lat_deg", "lon_deg", "h_m", "ve", "vn", "vu", "roll_deg", "pitch_deg",
                  "heading_deg")
-
-
-@dataclass
-class Trajectory:
-    """Position, velocity and attitude against time.
-
-    Attributes
-    ----------
-    t : (N,) s
-    lat, lon : (N,) rad (WGS-84 geodetic)
-    h : (N,) m
-    velocity_n : (N, 3) m/s, ENU
-    C_nb : (N, 3, 3) nav ENU -> body RFU
-    source : str
-        ``"simulated ..."`` for simulated data.
-    """
-
-    t: np.ndarray
-    lat: np.ndarray
-    lon: np.ndarray
-    h: np.ndarray
-    velocity_n: np.ndarray
-    C_nb: np.ndarray
-    source: str = "simulated"
-
-    def __len__(self) -> int:
-        return len(self.t)
-
-    def euler(self):
-        """``(roll, pitch, heading)`` arrays, rad."""
-        return att.euler_from_dcm_nb(self.C_nb)
 
 
 def write_truth(path, traj: Trajectory, comments=()):
@@ -52,7 +21,7 @@ def write_truth(path, traj: Trajectory, comments=()):
     if np.all(np.isfinite(traj.velocity_n)):
         cols.update(ve=traj.velocity_n[:, 0], vn=traj.velocity_n[:, 1], vu=traj.velocity_n[:, 2])
     if np.all(np.isfinite(traj.C_nb)):
-        roll, pitch, heading = traj.euler()
+        roll, pitch, heading = att.euler_from_dcm_nb(traj.C_nb)
         cols.update(roll_deg=np.degrees(roll), pitch_deg=np.degrees(pitch),
                     heading_deg=np.degrees(heading))
     fmt = {k: "%.10f" for k in ("lat_deg", "lon_deg")}

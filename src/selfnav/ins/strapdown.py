@@ -40,7 +40,7 @@ from numba import njit
 
 from selfnav.earth import SEED004_GAMMA_E, SEED004_GAMMA_P, WGS84, Ellipsoid
 from selfnav.errors import SelfnavError
-from selfnav.simulate.trajectory import Trajectory
+from selfnav.types import Trajectory
 
 _VERTICAL = {"free": 0, "fixed": 1}
 _NS = 15  # state: lat, lon, h, vE, vN, vU, C_bn (row-major 9)

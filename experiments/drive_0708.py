@@ -5,10 +5,11 @@ RTK solution is the truth, there is no independent reference). The GNSS given to
 edited: (i) 30 s outages every 120 s; (ii) a 3-minute window of unflagged outliers of 200 m σ,
 white or slowly drifting (first-order Gauss–Markov, τ = 60 s).
 
-    python -m selfnav.realdata /path/to/shared/data/rtklibexplorer_drive_0708
+    python -m experiments.drive_0708 /path/to/shared/data/rtklibexplorer_drive_0708
 """
 from __future__ import annotations
 
+import dataclasses
 import functools
 import sys
 import time
@@ -16,9 +17,10 @@ from pathlib import Path
 
 import numpy as np
 
-from selfnav import ekf
+from selfnav import ins
 from selfnav.earth import radii
-from selfnav.io.gnss import GnssData, read_rtklib_pos
+from selfnav.io.gnss import read_rtklib_pos
+from selfnav.types import GnssData
 from selfnav.io.rtklibexplorer import read_rtklibexplorer_imu
 from selfnav.sensors import outlier_errors
 
@@ -67,6 +69,19 @@ def with_outliers(g: GnssData, start, duration=180.0, sigma=200.0, kind="white",
     return out
 
 
+def filter_config(grade, **kw):
+    """The filter for a grade; ``consumer-car`` is the hand-tuned setting of the first sessions
+    (consumer noise with VRW ×5, ARW ×3, bias instability ×10, scale factors estimated)."""
+    if grade != "consumer-car":
+        return ins.FilterConfig.for_grade(grade, **kw)
+    base = ins.FilterConfig.for_grade("consumer").imu
+    noise = dataclasses.replace(base, vrw=base.vrw * 5, arw=base.arw * 3,
+                                gyro_bias_instability=base.gyro_bias_instability * 10,
+                                accel_bias_instability=base.accel_bias_instability * 10,
+                                grade="consumer-car (hand-tuned)")
+    return ins.FilterConfig.for_grade("consumer", imu=noise, **kw)
+
+
 @functools.lru_cache(maxsize=2)
 def _load0708(folder: str):
     """The drive's IMU and RTK solution, read once per folder (a scan runs the filter 48 times;
@@ -82,7 +97,7 @@ def drive0708(folder, *, scenarios=("all", "outages", "white", "gm", "drift", "o
     """Run the drive_0708 experiments; returns ``{scenario: {variant: metrics}}``.
 
     Variants: ``filter`` (real time), ``smoothed`` (RTS), and for outlier scenarios
-    ``filter, no shadows`` (window test, no shadow dead reckoning: :mod:`selfnav.drguard`) and
+    ``filter, no shadows`` (window test, no shadow dead reckoning: :mod:`selfnav.ins.guard`) and
     ``filter, no window test`` (the plain χ² gate).
 
     Scenarios: ``all`` fixes; ``outages`` (30 s every 120 s); 3-minute windows of 200 m σ
@@ -116,10 +131,10 @@ def drive0708(folder, *, scenarios=("all", "outages", "white", "gm", "drift", "o
                          ("filter, no window test", False, False, False)]
         res_sc = {}
         for name, robust, guard, sm in variants:
-            kw = dict(dict(robust=robust, dr_guard=guard), **cfg_kw)
-            cfg = ekf.FilterConfig.for_grade(grade, lever_arm_b=DRIVE0708_LEVER_ARM_B, **kw)
+            kw = dict(dict(robust=robust, use_shadows=guard), **cfg_kw)
+            cfg = filter_config(grade, lever_arm_b=DRIVE0708_LEVER_ARM_B, **kw)
             t0 = time.perf_counter()
-            res = ekf.run_filter(imu, g, cfg, smooth=sm)
+            res = ins.run_filter(imu, g, cfg, smooth=sm)
             el = time.perf_counter() - t0
             t, e = horizontal_error(res.trajectory, truth)
             m = {"rms_m": float(np.sqrt(np.mean(e**2))), "max_m": float(e.max()),

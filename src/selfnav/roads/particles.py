@@ -26,8 +26,8 @@ The estimate is the densest cluster (weight within ``cluster_radius``), its weig
 onto the best particle's segment: a position on the centre line, the road heading, and a spread.
 
 Used three ways: inside the seed 004 slow loop as its identification step (``--method seed
---matcher mht``, :mod:`selfnav.seedloop`), as the ``road_aid`` of the EKF (``--method ekf
---map``, :class:`selfnav.roadaid.EkfRoadAid`: cross-track, road-heading and corner-arc
+--matcher mht``, :mod:`selfnav.seed004`), as the ``road_aid`` of the EKF (``--method ekf
+--map``, :class:`selfnav.roads.aid.EkfRoadAid`: cross-track, road-heading and corner-arc
 constraints and a level-road prior), and stand-alone.
 
 Headings are clockwise from grid North of the map's local projection; the meridian convergence
@@ -40,7 +40,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from selfnav.roads import RoadGraph
+from selfnav.roads.graph import RoadGraph
 
 TWO_PI = 2.0 * np.pi
 
@@ -172,7 +172,7 @@ class RoadParticles:
         g = self.g
         import shapely
 
-        from selfnav.roads import project_points_to_segments
+        from selfnav.roads.graph import project_points_to_segments
 
         xy = np.asarray(xy, float)
         si = np.asarray(g.tree.query(shapely.points(xy), predicate="dwithin",

@@ -8,7 +8,7 @@ Three steps, used as the data allow:
     :func:`selfnav.latitude.estimate_latitude` (gyrocompassing with tilt compensation).
 ``fine_align``
     Static fine alignment: least squares on the velocity-error growth. The record is integrated
-    by the strapdown mechanization (:mod:`selfnav.strapdown`, height held) from the coarse
+    by the strapdown mechanization (:mod:`selfnav.ins.strapdown`, height held) from the coarse
     attitude; at rest the true velocity is zero, so the computed velocity *is* the error. Its
     growth over blocks of ``block`` seconds is fitted with the linear static error model
     (ENU, ψ-angle form)::
@@ -30,32 +30,26 @@ Three steps, used as the data allow:
     pitch from the specific force, both by one TRIAD — the body forward axis is along the GNSS
     velocity and the measured specific force equals ``a^n − g^n`` from the GNSS acceleration.
 ``init_from_gnss``
-    The filter's in-motion start (:func:`selfnav.ekf.run_filter`): the first straight,
+    The filter's in-motion start (:func:`selfnav.ins.run_filter`): the first straight,
     constant-speed run of mutually consistent fixes (unflagged outliers at start-up break it),
     roll and pitch from the last still second before, honest initial σ.
 """
 from __future__ import annotations
 
-import functools
 from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.linalg import expm, solve_triangular
-from scipy.stats import chi2
 
 from selfnav import attitude as att
-from selfnav.earth import OMEGA_EARTH, normal_gravity, radii
+from selfnav.earth import OMEGA_EARTH, enu_offset, normal_gravity, radii
 from selfnav.errors import SelfnavError
 from selfnav.latitude import estimate_latitude
-from selfnav.strapdown import integrate_imu
-from selfnav.ekf import FilterConfig, _enu_offset
-from selfnav.io.gnss import GnssData
+from selfnav.ins.strapdown import integrate_imu
+from selfnav.ins.config import FilterConfig, chi2_999
+from selfnav.types import GnssData
 
 
-@functools.lru_cache(maxsize=64)
-def _chi2_999(dof):
-    """0.999 quantile of χ²(dof)."""
-    return float(chi2.ppf(0.999, dof))
 
 DEG = np.pi / 180.0
 DEG_PER_H = DEG / 3600.0
@@ -411,7 +405,7 @@ def _consistent_run(p, t, sig, cfg):
     if np.any(np.linalg.norm(v, axis=1) > 70.0 + 3 * np.sqrt(2) * np.max(sig) / dt.min()):
         return False
     acc = np.linalg.norm(np.diff(v, axis=0), axis=1)
-    return bool(np.all(acc < cfg.max_accel * dt.max() + 3 * np.sqrt(6) * np.max(sig) / dt.min()))
+    return bool(np.all(acc < cfg.init.max_accel * dt.max() + 3 * np.sqrt(6) * np.max(sig) / dt.min()))
 
 
 def _still_before(imu, t_end, gnss=None, g=9.8, window=1.0, lookback=30.0, accel_bias=0.0):
@@ -442,7 +436,7 @@ def _still_before(imu, t_end, gnss=None, g=9.8, window=1.0, lookback=30.0, accel
         if gnss is not None:
             m = (gnss.t >= imu.t[j] - 1.0) & (gnss.t <= imu.t[min(j + n, len(imu.t) - 1)] + 1.0)
             if m.sum() >= 2:
-                d = _enu_offset(gnss.lat[m][0], gnss.lon[m][0], 0.0, gnss.lat[m][-1],
+                d = enu_offset(gnss.lat[m][0], gnss.lon[m][0], 0.0, gnss.lat[m][-1],
                                 gnss.lon[m][-1], 0.0)
                 span = gnss.t[m][-1] - gnss.t[m][0]
                 sig = float(np.max(gnss.sigma_m[m])) if gnss.sigma_m is not None else 5.0
@@ -472,13 +466,13 @@ def init_from_gnss(imu, gnss: GnssData, cfg: FilterConfig, sig_h):
     n = len(gnss.t)
     dtf = float(np.median(np.diff(gnss.t))) if n > 1 else 1.0
     s_med = float(np.median(sig_h))
-    W = int(np.clip(np.ceil((12.0 * s_med**2 / (0.25 * dtf**2)) ** (1.0 / 3.0)), max(cfg.window, 3), 20))
+    W = int(np.clip(np.ceil((12.0 * s_med**2 / (0.25 * dtf**2)) ** (1.0 / 3.0)), max(cfg.outliers.window, 3), 20))
     lat0, lon0 = gnss.lat[0], gnss.lon[0]
     rm, rn = radii(lat0, 0.0)
     p = np.column_stack([(gnss.lon - lon0) * rn * np.cos(lat0), (gnss.lat - lat0) * rm, gnss.h])
     for k in range(n - W + 1):
         sl = slice(k, k + W)
-        if cfg.robust and not _consistent_run(p[sl, :2], gnss.t[sl], sig_h[sl], cfg):
+        if cfg.outliers.robust and not _consistent_run(p[sl, :2], gnss.t[sl], sig_h[sl], cfg):
             continue
         # a straight-line fit gives the *mean* velocity: exact at the centre of the window for a
         # constant acceleration, so the filter starts at the centre time
@@ -488,15 +482,15 @@ def init_from_gnss(imu, gnss: GnssData, cfg: FilterConfig, sig_h):
         coef, *_ = np.linalg.lstsq(A, p[sl], rcond=None)
         s = float(np.max(sig_h[sl]))
         res = p[sl, :2] - A @ coef[:, :2]
-        if float(np.sum(res**2)) / s**2 > _chi2_999(2 * (W - 2)):
+        if float(np.sum(res**2)) / s**2 > chi2_999(2 * (W - 2)):
             continue  # turning or accelerating: the course is not one number
         cov = np.linalg.inv(A.T @ A) * s * s
         v0, sv = coef[1], float(np.sqrt(cov[1, 1]))
         if gnss.velocity_n is not None:
             v0 = np.array([np.interp(t0, gnss.t[sl], gnss.velocity_n[sl, i]) for i in range(3)])
-            sv = cfg.gnss_vel_sigma
+            sv = cfg.gnss.velocity_sigma
         speed = float(np.hypot(v0[0], v0[1]))
-        if speed <= max(cfg.min_init_speed, 6.0 * sv):
+        if speed <= max(cfg.init.min_speed, 6.0 * sv):
             continue
         sp = float(np.sqrt(cov[0, 0]))
         lat = lat0 + coef[0, 1] / rm
@@ -504,7 +498,7 @@ def init_from_gnss(imu, gnss: GnssData, cfg: FilterConfig, sig_h):
         hdg = np.arctan2(v0[0], v0[1])
         out = dict(t=t0, lat=lat, lon=lon, h=coef[0, 2], velocity_n=v0)
         still = _still_before(imu, t0, gnss, float(normal_gravity(lat, coef[0, 2])),
-                              accel_bias=cfg.accel_bias_sigma)
+                              accel_bias=cfg.imu.accel_bias_sigma)
         if still is not None:
             j0, a_bound = still
             js, je = j0, j0 + int(round(1.0 / imu.dt))
@@ -517,7 +511,7 @@ def init_from_gnss(imu, gnss: GnssData, cfg: FilterConfig, sig_h):
             w_mean = imu.omega_ib_b[js:je].mean(0)
             bg = w_mean - up_b * OMEGA_EARTH * np.sin(lat)
             sbg = np.sqrt(np.var(imu.omega_ib_b[js:je], axis=0) / (je - js)
-                          + (OMEGA_EARTH * np.cos(lat)) ** 2 + cfg.gyro_bias_instability**2)
+                          + (OMEGA_EARTH * np.cos(lat)) ** 2 + cfg.imu.gyro_bias_instability**2)
             out["gyro_bias"], out["gyro_bias_sigma"] = bg, sbg
             j1 = np.searchsorted(imu.t, t0)
             from selfnav.latitude import _gyro_attitude
@@ -540,4 +534,65 @@ def init_from_gnss(imu, gnss: GnssData, cfg: FilterConfig, sig_h):
                            [s_tilt, s_tilt, 2 * s_hdg]))
         return out
     raise SelfnavError(f"no run of {W} mutually consistent GNSS fixes on a straight line faster "
-                       f"than {cfg.min_init_speed} m/s to start from (heading needs motion)")
+                       f"than {cfg.init.min_speed} m/s to start from (heading needs motion)")
+
+
+#: median length of a 2-D normal vector of unit σ per axis (Rayleigh median √(2 ln 2))
+RAYLEIGH_MEDIAN = float(np.sqrt(2.0 * np.log(2.0)))
+#: a run of fixes is healthy while its median second difference stays below this many nominal
+#: Rayleigh medians (white 200 m outliers fail at once, a 200 m / 60 s drift on the median)
+HEALTHY_MEDIAN_RATIO = 1.6
+
+
+def healthy_start(t, xy, sigma, window=20):
+    """Index of the first fix of a run of ``window`` fixes that look healthy without an INS.
+
+    The second differences of the positions, ``z_k − 2 z_{k−1} + z_{k−2}`` (a constant-velocity
+    predictor), have a per-axis σ of ``√6 σ`` plus the change of velocity; their median length
+    over the run must stay below ``1.6 ×`` its nominal Rayleigh median and each below ``4 √6 σ``.
+    White 200 m outliers fail at once; drifting ones (Gauss-Markov, 200 m σ, τ 60 s: 36 m per
+    second) fail on the median. Returns None when no such run exists. ``t`` must be ~regular.
+    """
+    xy = np.asarray(xy, float)
+    n = len(xy)
+    if n < window + 2:
+        return None
+    d2 = np.hypot(*(xy[2:] - 2 * xy[1:-1] + xy[:-2]).T)     # d2[i] belongs to fix i + 2
+    s6 = np.sqrt(6.0) * np.asarray(sigma, float)[2:]
+    ok_each = d2 < 4.0 * s6
+    for k in range(0, n - 2 - window + 1):
+        seg = slice(k, k + window)
+        if ok_each[seg].all() and np.median(d2[seg]) < HEALTHY_MEDIAN_RATIO * RAYLEIGH_MEDIAN * float(np.median(s6[seg])):
+            return k     # fixes k .. k + window + 1 are healthy
+    return None
+
+
+def robust_init(imu, gnss, graph=None, *, sigma=10.0, window=20):
+    """The in-motion alignment (:func:`init_from_gnss`) started only after the first
+    run of healthy fixes (:func:`healthy_start`): an outlier window at start-up (seed 004: up
+    to 5 min, 200 m σ, white or drifting) must not seed the navigator hundreds of metres off.
+    ``gnss`` is WGS-84. With ``graph`` the heading is the nearest road direction and the
+    vertical velocity zero (seed (15) at the start)."""
+    sig = (np.asarray(gnss.sigma_m, float) if gnss.sigma_m is not None
+           else np.full(len(gnss.t), np.nan))
+    sig = np.where(np.isfinite(sig), sig, sigma)
+    xy = enu_offset(gnss.lat[0], gnss.lon[0], 0.0, gnss.lat, gnss.lon, 0.0)[:, :2]
+    k = healthy_start(gnss.t, xy, sig, window)
+    if k is None:
+        raise SelfnavError(f"no run of {window} healthy GNSS fixes to start from (outliers "
+                           "throughout?)")
+    sub = slice(k, None)
+    g2 = gnss.select(sub)
+    g2.sigma_m = sig[sub]
+    fc = FilterConfig.for_grade("consumer", window=15)
+    init = dict(init_from_gnss(imu, g2, fc, sig[sub]))
+    if graph is not None:
+        r0, _, k0 = att.euler_from_dcm_nb(init["C_nb"])
+        xi, yi = graph.to_local(init["lat"], init["lon"])
+        hd = graph.road_heading(np.array([[float(xi), float(yi)]]), float(k0))[0]
+        k0 = float(hd) if np.isfinite(hd) else float(k0)
+        v = np.asarray(init["velocity_n"], float)
+        sp = float(np.hypot(v[0], v[1]))
+        init["velocity_n"] = np.array([sp * np.sin(k0), sp * np.cos(k0), 0.0])
+        init["C_nb"] = att.dcm_nb_from_euler(float(r0), 0.0, k0)
+    return init

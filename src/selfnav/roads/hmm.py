@@ -4,7 +4,7 @@ The model follows Newson & Krumm (2009, "Hidden Markov map matching through nois
 sparseness"):
 
 * **states** at each fix are road candidates: the closest point of each nearby road (one per
-  OSM way and direction) within a search radius, from :meth:`selfnav.roads.RoadGraph.candidates`;
+  OSM way and direction) within a search radius, from :meth:`selfnav.roads.graph.RoadGraph.candidates`;
   a fix with no road inside the radius gets its nearest road, so that *every* fix is matched;
 * **emission**: Gaussian in the distance between fix and candidate,
   ``log p = -½ (d/σ)²`` with σ the fix's ``sigma_m`` (or the default);
@@ -32,7 +32,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from selfnav.roads import Candidates, RoadGraph
+from selfnav.roads.graph import Candidates, RoadGraph
 
 
 @dataclass

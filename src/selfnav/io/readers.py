@@ -1,0 +1,132 @@
+"""One entry per kind of input: the format dispatch of every reader (DESIGN §6).
+
+:func:`read_imu` and :func:`read_gnss` pick the reader by ``fmt`` or, with ``"auto"``, by the
+file name; each format module stays independent of the others (no module here is imported by a
+format reader).
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from selfnav.errors import InputError
+from selfnav.io.gnss import read_gnss_csv, read_nmea, read_rtklib_pos, to_wgs84
+from selfnav.io.imu import read_imu_csv
+from selfnav.io.kfgins import read_kfgins_imu
+from selfnav.io.nmea_rmc import read_nmea_rmc
+from selfnav.io.psins import read_psins_imu
+from selfnav.io.rtklibexplorer import IMU_T_OFF, read_rtklibexplorer_imu
+from selfnav.types import GnssData, ImuData
+
+IMU_FORMATS = ("auto", "csv", "psins", "rtklibexplorer", "kfgins")
+GNSS_FORMATS = ("auto", "csv", "pos", "nmea")
+
+
+def imu_format_of(path) -> str:
+    """The IMU format ``auto`` picks: PSINS for ``.imu``/``.imu.gz``, rtklibexplorer when a
+    ``.tag`` file stands beside the CSV, the native CSV otherwise."""
+    p = Path(path)
+    name = p.name.lower()
+    if name.endswith((".imu", ".imu.gz")):
+        return "psins"
+    if p.with_name(p.name + ".tag").exists():
+        return "rtklibexplorer"
+    return "csv"
+
+
+def read_imu(path, fmt: str = "auto", *, time_offset_s: float = 0.0) -> ImuData:
+    """Read an IMU file.
+
+    Parameters
+    ----------
+    path : str or Path
+    fmt : {"auto", "csv", "psins", "rtklibexplorer", "kfgins"}
+        ``auto``: :func:`imu_format_of`.
+    time_offset_s : float
+        Added to the time stamps, s. The rtklibexplorer format applies upstream's own
+        ``imu_t_off`` (−0.125 s) first; ``imu.meta["time_offset_s"]`` is the total applied.
+
+    Returns
+    -------
+    ImuData
+    """
+    p = Path(path)
+    fmt = imu_format_of(p) if fmt == "auto" else fmt
+    if fmt == "csv":
+        imu = read_imu_csv(p)
+    elif fmt == "psins":
+        imu = read_psins_imu(p)
+    elif fmt == "kfgins":
+        imu = read_kfgins_imu(p)
+    elif fmt == "rtklibexplorer":
+        imu = read_rtklibexplorer_imu(p, t_offset=IMU_T_OFF + time_offset_s)
+        imu.meta["time_offset_s"] = IMU_T_OFF + time_offset_s
+        imu.meta["format_time_offset_s"] = IMU_T_OFF
+        return imu
+    else:
+        raise InputError(p, f"unknown IMU format '{fmt}' (use {', '.join(IMU_FORMATS)})")
+    if time_offset_s:
+        imu = imu.shifted(time_offset_s)
+    imu.meta["time_offset_s"] = float(time_offset_s)
+    imu.meta["format_time_offset_s"] = 0.0
+    return imu
+
+
+def read_imu_positions(paths, fmt: str = "auto") -> ImuData:
+    """Read a multi-position record: several files (one per position) or one with ``position``."""
+    paths = list(paths)
+    if len(paths) == 1:
+        return read_imu(paths[0], fmt)
+    parts = [read_imu(p, fmt) for p in paths]
+    t = np.concatenate([p.t for p in parts])
+    pos = np.concatenate([np.full(len(p), k) for k, p in enumerate(parts)])
+    return ImuData(
+        t, np.concatenate([p.omega_ib_b for p in parts]), np.concatenate([p.f_ib_b for p in parts]),
+        None, pos, source=" + ".join(str(p) for p in paths),
+    )
+
+
+def gnss_format_of(path) -> str:
+    """The GNSS format ``auto`` picks from the extension: ``.pos`` RTKLIB, ``.nmea``/``.nma``/
+    ``.gga`` NMEA, anything else the native CSV."""
+    ext = Path(path).suffix.lower()
+    return {".pos": "pos", ".nmea": "nmea", ".nma": "nmea", ".gga": "nmea"}.get(ext, "csv")
+
+
+def _with_rmc_velocity(g: GnssData, path) -> GnssData:
+    """Add the horizontal velocity of RMC sentences (same time stamps) to GGA fixes."""
+    try:
+        rmc = read_nmea_rmc(path)
+    except InputError:
+        return g
+    if len(rmc.t) == 0:
+        return g
+    idx = np.clip(np.searchsorted(rmc.t, g.t), 0, len(rmc.t) - 1)
+    if not np.all(np.abs(rmc.t[idx] - g.t) < 1e-3):
+        return g
+    v = rmc.velocity_n[idx].copy()
+    v[:, 2] = np.where(np.isfinite(v[:, 2]), v[:, 2], 0.0)
+    g.velocity_n = v
+    return g
+
+
+def read_gnss(path, fmt: str = "auto", datum: str = "wgs84") -> GnssData:
+    """Read GNSS fixes: ``csv`` (native), ``pos`` (RTKLIB), ``nmea``; ``auto`` by extension.
+
+    Positions come back in WGS-84 whatever ``datum`` the file is in (``wgs84``, ``pz90.11``,
+    ``pz90``, ``sk42``).
+    """
+    p = Path(path)
+    fmt = gnss_format_of(p) if fmt == "auto" else fmt
+    if fmt == "csv":
+        return read_gnss_csv(p, datum)
+    if fmt == "pos":
+        g = read_rtklib_pos(p)
+    elif fmt == "nmea":
+        g = _with_rmc_velocity(read_nmea(p), p)
+    else:
+        raise InputError(p, f"unknown GNSS format '{fmt}' (use {', '.join(GNSS_FORMATS)})")
+    if datum.lower() != "wgs84":
+        g.lat, g.lon, g.h = to_wgs84(g.lat, g.lon, g.h, datum, p)
+    return g
