@@ -32,7 +32,7 @@ def main():
     print(f"simulated {len(imu)} IMU samples (200 Hz), {len(fx.t)} fixes in "
           f"{time.perf_counter() - t0:.1f} s (simulated data)")
     data = ImuData(imu.t, w, f)
-    gd = GnssData(fx.t, fx.lat, fx.lon, fx.h, fx.sigma_m)
+    gd = fx.as_gnss()
     for smooth in (False, True):
         cfg = ins.FilterConfig.for_grade("industrial")
         t0 = time.perf_counter()

@@ -28,7 +28,7 @@ def main():
                                  "map": "kotka_karhula"}, "imu": {"grade": "consumer"},
                     "mag": {"enabled": True}, "gnss": {"outliers": [], "spike_rate": 0.0}}, seed=3)
     g = sim.gnss
-    gd = GnssData(g.t, g.lat, g.lon, g.h, g.sigma_m, None, None, "simulated")
+    gd = g.as_gnss(source="simulated")
     graph = read_roads(sim.map_path)
     span = float(sim.imu.t[-1] - sim.imu.t[0])
     run_seed(sim.imu, gd, graph, SeedConfig(matcher="mht"))   # warm the numba caches

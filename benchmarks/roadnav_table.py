@@ -99,7 +99,7 @@ def run_one(map_name, duration, seed, outliers=True):
     sim = simulate(spec, seed=seed)
     graph = read_roads(sim.map_path)
     g = sim.gnss
-    gd = GnssData(g.t, g.lat, g.lon, g.h, g.sigma_m, None, None, "simulated")
+    gd = g.as_gnss(source="simulated")
     rows = {"windows": wins, "sim": sim}
     for name, matcher in (("seed loop", "seed"), ("seed loop + mht", "mht")):
         t0 = time.perf_counter()

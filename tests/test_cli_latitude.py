@@ -4,7 +4,7 @@ import json
 import numpy as np
 import pytest
 
-from selfnav.cli import main
+from support import run_cli as run
 from selfnav.io.csvio import write_csv
 from selfnav.simulate.static import static_imu
 
@@ -24,12 +24,6 @@ def _write_imu(path, imu, **override):
 def imu():
     return static_imu(np.radians(48.0), 120, 0.1, roll=0.02, pitch=-0.03, heading=2.0,
                       arw=np.radians(0.01) / 60, vrw=1e-4, seed=7)
-
-
-def run(argv, capsys):
-    code = main([str(a) for a in argv])
-    out = capsys.readouterr()
-    return code, out.out, out.err
 
 
 def test_latitude_json_contract(tmp_path, imu, capsys):
@@ -150,12 +144,3 @@ def test_no_partial_output_on_error(tmp_path):
     with pytest.raises(ValueError):
         wc(target, {"a": np.arange(3), "b": np.arange(4)})
     assert not target.exists() and list(tmp_path.iterdir()) == []
-
-
-def test_demo_runs_on_shipped_data(tmp_path, capsys):
-    code, out, err = run(["demo", "--out", tmp_path / "demo", "--json"], capsys)
-    assert code == 0, err
-    d = json.loads(out)
-    assert abs(d["error_deg"]) < 0.1
-    assert (tmp_path / "demo" / "index.html").exists()
-    assert (tmp_path / "demo" / "latitude_windows.png").stat().st_size > 10000

@@ -5,12 +5,7 @@ import json
 import pytest
 
 from selfnav.cli import main
-
-
-def run(argv, capsys):
-    code = main([str(a) for a in argv])
-    out = capsys.readouterr()
-    return code, out.out, out.err
+from support import run_cli as run
 
 
 @pytest.fixture(scope="module")

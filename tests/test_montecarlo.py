@@ -48,6 +48,7 @@ def test_seeds_are_deterministic_and_distinct():
     assert np.array_equal(mc.run_seeds(7, 10), a[:10])  # run i's seed does not depend on N
 
 
+@pytest.mark.slow
 def test_same_seed_same_results_in_process_and_on_cluster(cluster):
     from dask.distributed import Client
 
@@ -65,6 +66,7 @@ def test_same_seed_same_results_in_process_and_on_cluster(cluster):
     assert not np.array_equal(r0.table["error"], r3.table["error"])
 
 
+@pytest.mark.slow
 def test_custom_pair_statistics_on_cluster(cluster):
     """A pair registered in a test module travels to the workers (cloudpickle); its
     statistics match their analytic values."""

@@ -46,7 +46,6 @@ def navigation_demo(duration: float = 420.0, seeds=(1, 2, 3)) -> dict:
     """
     from selfnav import ins
     from selfnav.evaluate import evaluate
-    from selfnav.types import GnssData
     from selfnav.roads.aid import EkfRoadAid
     from selfnav.roads.graph import read_roads
     from selfnav.ins.align import robust_init
@@ -66,7 +65,7 @@ def navigation_demo(duration: float = 420.0, seeds=(1, 2, 3)) -> dict:
         sim = simulate(spec, seed=seed)
         graph = read_roads(sim.map_path)
         g = sim.gnss
-        gd = GnssData(g.t, g.lat, g.lon, g.h, g.sigma_m, None, None, "simulated")
+        gd = g.as_gnss(source="simulated")
         tracks = {}
         for name, robust, road in names:
             cfg = ins.FilterConfig.for_grade("consumer", robust=robust)

@@ -341,7 +341,7 @@ def _tilt_series(f_b, f_ref_unit):
 
 
 @njit(cache=True)
-def _gyro_attitude(omega, dt):  # pragma: no cover - compiled
+def gyro_attitude(omega, dt):  # pragma: no cover - compiled
     """Cumulative attitude ``q_k = C_{b_k}^{b_0}`` (inertial) from rates, scalar-first quaternions.
 
     Rotation-vector update with the two-sample coning correction
@@ -409,7 +409,7 @@ def _rate_estimates(imu, lab, n_blocks, compensate):
     f_full = f_sum.sum(0) / cnt.sum()
     fb = f_sum / cnt[:, None]
     cov_f = _batch_cov((fb - f_full) * (cnt / cnt.sum())[:, None], n_blocks)
-    q = _gyro_attitude(np.ascontiguousarray(w), np.ascontiguousarray(dt))
+    q = gyro_attitude(np.ascontiguousarray(w), np.ascontiguousarray(dt))
     if not compensate:
         edges = np.concatenate([[0], np.cumsum(np.bincount(lab, minlength=n_blocks))])
         rho = att.quat_to_rotvec(att.quat_multiply(_quat_conj(q[edges[:-1]]), q[edges[1:]]))

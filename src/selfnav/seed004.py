@@ -62,7 +62,7 @@ from selfnav import attitude as att
 from selfnav import datum as dm
 from selfnav.earth import KRASOVSKY, radii
 from selfnav.errors import SelfnavError
-from selfnav.roads.particles import MatcherConfig, RoadParticles, _move, successor_table, wrap
+from selfnav.roads.particles import MatcherConfig, RoadParticles, move_particles, successor_table, wrap
 from selfnav.roads.graph import RoadGraph
 from selfnav.types import Trajectory
 from selfnav.ins.align import healthy_start, robust_init
@@ -296,7 +296,7 @@ def run_seed(imu, gnss, graph: RoadGraph, cfg: SeedConfig | None = None, *, gnss
             # where the vehicle is; step 3: the prediction walks ΔS (13) along the road graph
             # from the last identified point, taking at a junction the branch nearest to K^ср
             sg, al = np.array([seg_prev]), np.array([along_prev])
-            _move(sg, al, np.array([dS]), graph.seg_len, graph.seg_heading, graph.seg_twin,
+            move_particles(sg, al, np.array([dS]), graph.seg_len, graph.seg_heading, graph.seg_twin,
                   succ_off, succ, K_mean, np.radians(20.0), 0.0, np.ones(1), np.full((1, 4), 0.5))
             pred = graph.segment_points(sg, al)[0]
             pred_pt = pred

@@ -31,6 +31,7 @@ from scipy.signal import lfilter
 from selfnav import attitude as att
 from selfnav.earth import radii
 from selfnav.errors import SelfnavError
+from selfnav.types import GnssData
 from selfnav.units import DEG, DEG_PER_H, DEG_PER_SQRT_H, G0, MPS_PER_SQRT_H, PPM, UG
 
 
@@ -473,6 +474,12 @@ class GnssFixes:
     spike: np.ndarray
     windows: list
     datum: str = "wgs84"
+
+    def as_gnss(self, *, velocity: bool = False, source: str = "simulated") -> GnssData:
+        """The fixes as a receiver file gives them (:class:`~selfnav.types.GnssData`): positions,
+        the reported σ and, with ``velocity``, the velocity; none of the error truth."""
+        return GnssData.from_arrays(self.t, self.lat, self.lon, self.h, self.sigma_m,
+                                    self.velocity_n if velocity else None, source=source)
 
 
 @dataclass

@@ -44,7 +44,7 @@ from scipy.linalg import expm, solve_triangular
 from selfnav import attitude as att
 from selfnav.earth import OMEGA_EARTH, enu_offset, normal_gravity, radii
 from selfnav.errors import SelfnavError
-from selfnav.latitude import estimate_latitude
+from selfnav.latitude import estimate_latitude, gyro_attitude
 from selfnav.ins.strapdown import integrate_imu
 from selfnav.ins.config import FilterConfig, chi2_999
 from selfnav.types import GnssData
@@ -514,9 +514,8 @@ def init_from_gnss(imu, gnss: GnssData, cfg: FilterConfig, sig_h):
                           + (OMEGA_EARTH * np.cos(lat)) ** 2 + cfg.imu.gyro_bias_instability**2)
             out["gyro_bias"], out["gyro_bias_sigma"] = bg, sbg
             j1 = np.searchsorted(imu.t, t0)
-            from selfnav.latitude import _gyro_attitude
             dts = np.diff(imu.t[je - 1:j1 + 1], prepend=imu.t[je - 1] - imu.dt)
-            q = _gyro_attitude(np.ascontiguousarray(imu.omega_ib_b[je - 1:j1 + 1] - bg), dts)
+            q = gyro_attitude(np.ascontiguousarray(imu.omega_ib_b[je - 1:j1 + 1] - bg), dts)
             C_bn = C0.T @ att.quat_to_dcm(q[-1])
             roll, pitch, _ = att.euler_from_dcm_bn(C_bn)
             dur = imu.t[j1] - imu.t[je - 1]

@@ -312,13 +312,13 @@ def _lever_arm_n(self):
 InsGnssFilter.lever_arm_n = _lever_arm_n
 
 
-def _pack(flt):
+def pack_state(flt):
     s = flt.ins
     return np.concatenate([[s.lat, s.lon, s.h], s.velocity_n, s.C_nb.reshape(9), flt.bg, flt.ba,
                            flt.sg, flt.sa, flt.mu])
 
 
-def _unpack(t, states, Ps):
+def unpack_states(t, states, Ps):
     C = states[:, 6:15].reshape(-1, 3, 3)
     traj = Trajectory(t, states[:, 0], states[:, 1], states[:, 2], states[:, 3:6], C,
                       source="selfnav ekf")
@@ -326,7 +326,7 @@ def _unpack(t, states, Ps):
     return traj, sig, states[:, 15:18], states[:, 18:21], states[:, 27:29]
 
 
-def _apply_error(state, dx):
+def apply_error(state, dx):
     """Remove an error-state estimate from a packed nominal state.
 
     The layout is told by the length of ``dx``: 15 (+6 scale factors) (+2 mounting angles).
@@ -351,7 +351,7 @@ def _apply_error(state, dx):
     return out
 
 
-def _rts(states, P_plus, P_minus, Phi, updates, breaks=None):
+def rts_smooth(states, P_plus, P_minus, Phi, updates, breaks=None):
     """Rauch–Tung–Striebel smoother in error-state form over the stored epochs.
 
     Epoch k holds the corrected nominal state x̃⁺_k with covariance P⁺_k; ``Phi[k]`` carries the
@@ -377,7 +377,7 @@ def _rts(states, P_plus, P_minus, Phi, updates, breaks=None):
         A = np.linalg.solve(Pm.T, (P_plus[k] @ Phi[k + 1].T).T).T
         eps = A @ (updates[k + 1] + eps_next)
         Ps[k] = P_plus[k] + A @ (Ps[k + 1] - Pm) @ A.T
-        out[k] = _apply_error(states[k], eps)
+        out[k] = apply_error(states[k], eps)
         eps_next = eps
     return out, Ps
 

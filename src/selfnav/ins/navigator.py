@@ -24,8 +24,8 @@ from selfnav.earth import enu_offset
 from selfnav.ins.align import init_from_gnss
 from selfnav.ins.config import FilterConfig
 from selfnav.ins.guard import DeadReckoningGuard, track_agrees, white_scale, window_consistent
-from selfnav.ins.ekf import (IBG, IP, IR, IV, InsGnssFilter, _pack,
-                         _rts, _unpack)
+from selfnav.ins.ekf import (IBG, IP, IR, IV, InsGnssFilter, pack_state,
+                         rts_smooth, unpack_states)
 from selfnav.errors import SelfnavError
 from selfnav.types import GnssData
 from selfnav.types import Trajectory
@@ -241,7 +241,7 @@ class StreamingNavigator:
             return
         r = self.rec
         r["t"].append(te)
-        r["state"].append(_pack(self.flt))
+        r["state"].append(pack_state(self.flt))
         r["P"].append(self.flt.P.copy())
         # covariance added without a measurement is process noise: part of the prior
         r["Pm"].append(Pm if self._widened is None else Pm + self._widened)
@@ -397,13 +397,13 @@ class StreamingNavigator:
         Ps = np.asarray(r["P"])
         smoothed = False
         if smooth and len(t) > 2:
-            states, Ps = _rts(states, Ps, np.asarray(r["Pm"]), np.asarray(r["Phi"]),
+            states, Ps = rts_smooth(states, Ps, np.asarray(r["Pm"]), np.asarray(r["Phi"]),
                               np.asarray(r["dx"]), np.asarray(r["brk"], bool))
             smoothed = True
         # several epochs can share a time (a fix and an aiding epoch): keep the last state
         last = np.r_[t[1:] != t[:-1], True] if len(t) else np.zeros(0, bool)
         t, states, Ps = t[last], states[last], Ps[last]
-        traj, sig, bg, ba, mount = _unpack(t, states, Ps)
+        traj, sig, bg, ba, mount = unpack_states(t, states, Ps)
         st = np.asarray(self.status, int)
         stats = {"fixes": len(st), "accepted": int(np.sum(st == 1)),
                  "rejected": int(np.sum(st == 0)), "before_init": int(np.sum(st == -1)),

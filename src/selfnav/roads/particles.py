@@ -72,7 +72,7 @@ def successor_table(graph: RoadGraph):
 
 
 @njit(cache=True)
-def _move(seg, along, dist, seg_len, seg_heading, seg_twin, off, succ, heading, sig_turn,
+def move_particles(seg, along, dist, seg_len, seg_heading, seg_twin, off, succ, heading, sig_turn,
           p_uturn, rnd_u, rnd):  # pragma: no cover - numba
     """Advance particles along the graph in place (see the module docstring)."""
     n = len(seg)
@@ -223,7 +223,7 @@ class RoadParticles:
         dist = ds * (1.0 + c.travel_rel * self.rng.normal(size=n)) \
             + c.travel_abs * np.sqrt(max(dt, 0.0)) * self.rng.normal(size=n) \
             - (self.dv * dt if moving else 0.0)
-        _move(self.seg, self.along, dist, self.g.seg_len, self.g.seg_heading, self.g.seg_twin,
+        move_particles(self.seg, self.along, dist, self.g.seg_len, self.g.seg_heading, self.g.seg_twin,
               self.off, self.succ, float(heading), c.sigma_turn, c.p_uturn,
               self.rng.uniform(size=n), self.rng.uniform(size=(n, 4)))
         # the displacement for the GNSS health test follows the road once the cloud has an

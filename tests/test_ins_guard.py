@@ -7,15 +7,14 @@ from selfnav import ins
 from selfnav.ins import ekf
 from selfnav.ins.guard import clone_filter, track_agrees
 from selfnav.types import ImuData
-from selfnav.roads.graph import packaged_map, read_roads
 from selfnav.sensors import OutlierWindow, drift_errors
 
-from test_ekf import _drive, _errors, _window_metrics
+from support import simulated_drive as _drive, errors as _errors, window_metrics as _window_metrics
 
 
 @pytest.fixture(scope="module")
-def graph():
-    return read_roads(packaged_map("kotka_karhula.osm.pbf"))
+def graph(karhula):
+    return karhula
 
 
 def test_drift_errors_statistics():
@@ -56,6 +55,7 @@ def test_clone_is_independent(graph):
                                             truth.velocity_n[0], truth.C_nb[0]).P)
 
 
+@pytest.mark.slow
 def test_smooth_drift_is_caught_by_the_shadow_dead_reckoning(graph):
     """Simulated drive (labelled simulated), consumer MEMS, 5 min of a smooth 200 m σ drift.
 
@@ -73,6 +73,7 @@ def test_smooth_drift_is_caught_by_the_shadow_dead_reckoning(graph):
         assert out[False][0] > 5 * out[True][0], (kind, out)
 
 
+@pytest.mark.slow
 def test_mounting_angles_are_estimated(graph):
     """An IMU pitched 1.5° and yawed −2.5° against the car (simulated): the NHC states find it."""
     imu, g, truth = _drive(graph, 2, duration=600.0)

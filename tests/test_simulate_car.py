@@ -6,21 +6,11 @@ from selfnav import attitude as att
 import pytest
 
 from selfnav.errors import InputError
-from selfnav.roads.graph import packaged_map, project_to_polyline, read_roads
+from selfnav.roads.graph import project_to_polyline
 from selfnav.simulate.car import CarTrajectory, car_route, car_trajectory, smooth_path
 from selfnav.types import Trajectory
 
 A_MAX, LAT_MAX, V_MAX = 2.0, 2.5, 20.0
-
-
-@pytest.fixture(scope="module")
-def helsinki():
-    return read_roads(packaged_map("helsinki_centre"))
-
-
-@pytest.fixture(scope="module")
-def karhula():
-    return read_roads(packaged_map("kotka_karhula"))
 
 
 @pytest.fixture(scope="module")

@@ -16,16 +16,6 @@ from selfnav.roads.graph import (DRIVABLE, packaged_map, project_points_to_segme
                            project_to_polyline, read_roads)
 
 
-@pytest.fixture(scope="module")
-def karhula():
-    return read_roads(packaged_map("kotka_karhula"))
-
-
-@pytest.fixture(scope="module")
-def helsinki():
-    return read_roads(packaged_map("helsinki_centre"))
-
-
 def test_packaged_maps_are_the_shared_extracts(shared_data):
     for name in ("kotka_karhula", "helsinki_centre"):
         ours = packaged_map(name).read_bytes()

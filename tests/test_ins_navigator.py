@@ -1,5 +1,4 @@
 """INS/GNSS error-state filter: consistency, outliers nothing flags, smoother, streaming = batch."""
-import dataclasses
 
 import numpy as np
 import pytest
@@ -9,58 +8,18 @@ from selfnav import ins
 from selfnav.ins import ekf
 from selfnav.earth import radii
 from selfnav.ins.navigator import StreamingNavigator, init_from_gnss
-from selfnav.types import GnssData
-from selfnav.types import ImuData
-from selfnav.roads.graph import packaged_map, read_roads
-from selfnav.sensors import GnssModel, OutlierWindow, imu_grade
-from selfnav.simulate.car import car_trajectory
-from selfnav.simulate.inverse import imu_from_trajectory
+from selfnav.sensors import OutlierWindow
+
+
+from support import simulated_drive as _drive, errors as _errors, window_metrics as _window_metrics
 
 
 @pytest.fixture(scope="module")
-def graph():
-    return read_roads(packaged_map("kotka_karhula.osm.pbf"))
+def graph(karhula):
+    return karhula
 
 
-def _drive(graph, seed, duration=600.0, outliers=(), grade="industrial", sigma=3.0):
-    """Simulated car (labelled simulated): exact IMU corrupted by a grade model without
-    scale-factor/misalignment terms (the 15-state filter does not model them), 1 Hz GNSS."""
-    tr = car_trajectory(graph, duration=duration, dt=0.1, seed=seed, hold_start=10 if seed % 2 else 0)
-    imu, truth = imu_from_trajectory(tr, 0.01, return_truth=True)
-    rng = np.random.default_rng(seed)
-    m = imu_grade(grade)
-    m = dataclasses.replace(m, gyro=dataclasses.replace(m.gyro, scale_factor=0.0, misalignment=0.0,
-                                                        quantum=0.0),
-                            accel=dataclasses.replace(m.accel, scale_factor=0.0, misalignment=0.0))
-    w, f = m.apply(imu.t, imu.omega_ib_b, imu.f_ib_b, rng)
-    fx = GnssModel(rate_hz=1, sigma_h=sigma, sigma_v=5, outliers=list(outliers)).simulate(truth, rng)
-    g = GnssData(fx.t, fx.lat, fx.lon, fx.h, fx.sigma_m)
-    return ImuData(imu.t, w, f, source="simulated car"), g, truth
-
-
-def _errors(res, truth):
-    tt = res.trajectory
-    k = np.clip(np.searchsorted(truth.t, tt.t), 0, len(truth.t) - 1)
-    ok = np.abs(truth.t[k] - tt.t) < 1e-6
-    k = k[ok]
-    rm, rn = radii(truth.lat[k])
-    de = (tt.lon[ok] - truth.lon[k]) * rn * np.cos(truth.lat[k])
-    dn = (tt.lat[ok] - truth.lat[k]) * rm
-    dv = tt.velocity_n[ok] - truth.velocity_n[k]
-    psi = -att.dcm_to_rotvec(np.swapaxes(tt.C_nb[ok], 1, 2) @ truth.C_nb[k])
-    return tt.t[ok], np.column_stack([de, dn]), dv, psi, ok
-
-
-def _window_metrics(res, truth, win):
-    """Horizontal error: RMS and max inside the outlier window, RMS outside it (from 60 s after
-    the in-motion alignment transient)."""
-    t, dp, *_ = _errors(res, truth)
-    e = np.hypot(dp[:, 0], dp[:, 1])
-    w = (t >= win.start) & (t < win.end)
-    rest = ~w & (t > t[0] + 60.0)
-    return np.sqrt(np.mean(e[w] ** 2)), e[w].max(), np.sqrt(np.mean(e[rest] ** 2))
-
-
+@pytest.mark.slow
 def test_statistical_consistency_on_simulated_drives(graph):
     zp, zv, za = [], [], []
     for seed in range(3):
@@ -81,6 +40,7 @@ def test_statistical_consistency_on_simulated_drives(graph):
         assert 0.7 <= rms <= 1.5, rms
 
 
+@pytest.mark.slow
 def test_unflagged_outlier_windows_white_and_drifting(graph):
     """Seed 004's case: a consumer MEMS, 5 min of unflagged 200 m σ fixes, white or drifting.
 
@@ -112,6 +72,7 @@ def test_outliers_at_start_up(graph):
     assert np.sqrt(np.mean(np.sum(dp**2, 1))) < 3.0
 
 
+@pytest.mark.slow
 def test_smoother_beats_filter(graph):
     win = OutlierWindow(200.0, 120.0, 200.0, "gm")
     imu, g, truth = _drive(graph, 2, outliers=[win])
@@ -172,6 +133,7 @@ def test_heading_and_road_updates_move_toward_truth():
     assert (flt.ins.lat - lat0) * rm == pytest.approx(-4.0 * 25 / 26, rel=1e-3)
 
 
+@pytest.mark.slow
 def test_drive0708_real_data(shared_data):
     from experiments.drive_0708 import drive0708
 

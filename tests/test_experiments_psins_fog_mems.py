@@ -11,7 +11,8 @@ import pytest
 from experiments.psins_fog_mems import _load, evaluate_fog_mems, fog_gnss
 
 DATA = Path("/work/shared/data/psins_fog_mems_vehicle")
-pytestmark = pytest.mark.skipif(not (DATA / "mimu.csv").exists(), reason="data set not present")
+pytestmark = [pytest.mark.skipif(not (DATA / "mimu.csv").exists(), reason="data set not present"),
+              pytest.mark.slow]  # real data, the whole record
 
 
 @pytest.fixture(scope="module")

@@ -1,23 +1,17 @@
-"""Road-constrained particle matcher (issue 5): driven by travel and heading on a real map."""
+"""EKF road aid (issue 5): cross-track and road heading from the particle matcher, corner legs
+and the driven arc; EKF + map on simulated drives on real maps (labelled simulated)."""
 import numpy as np
 import pytest
 
+from selfnav import ins
 from selfnav.roads.aid import EkfRoadAid
-from selfnav.roads.particles import MatcherConfig, RoadParticles, successor_table, wrap
-from selfnav.roads.graph import packaged_map, read_roads
-from selfnav.sensors import GnssModel, OutlierWindow
-from selfnav.simulate.car import car_route
-
-
-@pytest.fixture(scope="module")
-def helsinki():
-    return read_roads(packaged_map("helsinki_centre"))
-
+from selfnav.roads.particles import successor_table, wrap
+from selfnav.roads.graph import read_roads
+from selfnav.types import GnssData
 
 
 def _sim_drive(map_name, grade, duration, outlier_s, mag):
     """Simulated car (labelled simulated), seed 4: one white 200 m window from 150 s."""
-    from selfnav.types import GnssData
     from selfnav.simulate.scenarios import simulate
 
     spec = {"scenario": {"kind": "car", "duration": duration, "map": map_name, "dt": 0.01},
@@ -26,71 +20,32 @@ def _sim_drive(map_name, grade, duration, outlier_s, mag):
                      "spike_rate": 0.0}}
     sim = simulate(spec, seed=4)
     f = sim.gnss
-    gd = GnssData(f.t, f.lat, f.lon, f.h, f.sigma_m, None, None, "simulated")
+    gd = f.as_gnss(source="simulated")
     return sim, gd, read_roads(sim.map_path)
 
-def test_successors_leave_the_end_node_and_skip_the_twin(helsinki):
-    g = helsinki
+
+def _corner(g, lo=np.radians(60.0), hi=np.radians(120.0), min_len=20.0):
+    """A directed segment and a successor turning by lo..hi, both legs at least min_len."""
     off, succ = successor_table(g)
-    for s in range(0, g.n_segments, 97):
-        nx = succ[off[s]:off[s + 1]]
-        assert len(nx) >= 1
-        assert np.all(g.seg_u[nx] == g.seg_v[s])
-        if len(nx) > 1:
-            assert g.seg_twin[s] not in nx
+    for s in range(g.n_segments):
+        for q in succ[off[s]:off[s + 1]]:
+            th = abs(float(wrap(g.seg_heading[q] - g.seg_heading[s])))
+            if lo < th < hi and min(g.seg_len[s], g.seg_len[q]) > min_len:
+                return int(s), int(q)
+    raise AssertionError("no corner on the map")
 
 
-def _drive(g, windows, seed=3, duration=300.0):
-    traj, route = car_route(g, duration=duration, dt=0.1, seed=seed)
-    fx = GnssModel(1.0, 10.0, 15.0, outliers=windows).simulate(traj, 1)
-    x, y = g.to_local(fx.lat, fx.lon)
-    idx = np.minimum(np.searchsorted(traj.t, fx.t), len(traj.t) - 1)
-    hdg = np.arctan2(traj.velocity_n[:, 0], traj.velocity_n[:, 1])
-    return route, np.column_stack([x, y]), idx, hdg, fx
+def _gnss_at(g, n, xy=(0.0, 0.0), t0=1e6):
 
-
-def _run(g, route, z, idx, hdg, rng):
-    pf = RoadParticles(g, MatcherConfig(), seed=0)
-    pf.seed(z[0], 60.0)
-    err = []
-    for k in range(1, len(z)):
-        ds = (route.s[idx[k]] - route.s[idx[k - 1]]) * (1 + 0.01 * rng.normal())
-        pf.predict(ds, hdg[idx[k]] + np.radians(3.0) * rng.normal())
-        pf.update_gnss(z[k])
-        err.append(np.hypot(*(pf.estimate()["xy"] - route.xy[idx[k]])))
-    return np.asarray(err), pf
-
-
-def test_holds_the_road_through_white_and_drifting_200m_outliers(helsinki):
-    """Simulated (labelled): 300 s in central Helsinki, a 100 s white and a 100 s drifting
-    200 m σ window; travel (1 % error) and heading (3°) stand in for the INS."""
-    g = helsinki
-    wins = [OutlierWindow(60, 100, 200, "white"), OutlierWindow(180, 100, 200, "gm")]
-    route, z, idx, hdg, fx = _drive(g, wins)
-    err, pf = _run(g, route, z, idx, hdg, np.random.default_rng(5))
-    settled = err[30:]
-    assert np.sqrt(np.mean(settled**2)) < 8.0, np.sqrt(np.mean(settled**2))
-    assert np.max(settled) < 30.0
-    # the raw fixes inside the windows are far worse
-    raw = np.hypot(*(z - route.xy[idx]).T)[fx.outlier]
-    assert np.sqrt(np.mean(raw**2)) > 100.0
-
-
-def test_estimate_lies_on_a_road_and_heads_along_it(helsinki):
-    g = helsinki
-    pf = RoadParticles(g, seed=1)
-    pf.seed(np.array([0.0, 0.0]), 50.0)
-    e = pf.estimate()
-    c = g.candidates(e["xy"][None], 1.0, k=1, per_way=False)
-    assert len(c) and c.dist[0] < 1e-6
-    assert abs(wrap(e["heading"] - g.seg_heading[e["seg"]])) < 1e-9
+    lat, lon = g.to_geodetic(xy[0], xy[1])
+    return GnssData(t0 + np.arange(n, dtype=float), np.full(n, lat), np.full(n, lon),
+                    np.zeros(n), np.full(n, 10.0), None, None, "t")
 
 
 def test_ekf_road_aid_returns_a_cross_track_constraint(helsinki):
     from types import SimpleNamespace
 
     from selfnav import attitude as att
-    from selfnav.types import GnssData
 
     g = helsinki
     s = 100
@@ -111,10 +66,10 @@ def test_ekf_road_aid_returns_a_cross_track_constraint(helsinki):
     assert abs(out["offset"]) < 10.0 and out["sigma"] > 0
 
 
+@pytest.mark.slow
 def test_ekf_with_the_map_holds_the_centre_line():
     """Simulated (labelled): 240 s on the Kotka map, industrial MEMS, σ 10 m GNSS with a 60 s
     white 200 m window; the road aid takes the cross-track RMS well below a metre."""
-    from selfnav import ins
     from selfnav.evaluate import evaluate
 
     sim, gd, g = _sim_drive("kotka_karhula", "industrial", 240.0, 60.0, mag=False)
@@ -125,17 +80,6 @@ def test_ekf_with_the_map_holds_the_centre_line():
     assert aided["cross_track_rms_m"] < 1.0, aided["cross_track_rms_m"]
     assert aided["cross_track_rms_m"] < 0.5 * plain["cross_track_rms_m"]
     assert aided["along_track_rms_m"] < 1.5 * plain["along_track_rms_m"] + 1.0
-
-
-def _corner(g, lo=np.radians(60.0), hi=np.radians(120.0), min_len=20.0):
-    """A directed segment and a successor turning by lo..hi, both legs at least min_len."""
-    off, succ = successor_table(g)
-    for s in range(g.n_segments):
-        for q in succ[off[s]:off[s + 1]]:
-            th = abs(float(wrap(g.seg_heading[q] - g.seg_heading[s])))
-            if lo < th < hi and min(g.seg_len[s], g.seg_len[q]) > min_len:
-                return int(s), int(q)
-    raise AssertionError("no corner on the map")
 
 
 def test_corner_arc_is_the_circle_tangent_to_both_legs(helsinki):
@@ -162,14 +106,6 @@ def test_corner_arc_is_the_circle_tangent_to_both_legs(helsinki):
     _, cut = aid._arc(s, q, V, R)
     assert abs(cut - R * (1.0 / np.cos(th / 2) - 1.0)) < 1e-9
     assert aid._arc(s, q, T1 - 15.0 * d1, R) is None
-
-
-def _gnss_at(g, n, xy=(0.0, 0.0), t0=1e6):
-    from selfnav.types import GnssData
-
-    lat, lon = g.to_geodetic(xy[0], xy[1])
-    return GnssData(t0 + np.arange(n, dtype=float), np.full(n, lat), np.full(n, lon),
-                    np.zeros(n), np.full(n, 10.0), None, None, "t")
 
 
 def test_cross_track_needs_the_line_not_the_position_along_it(helsinki):
@@ -203,12 +139,12 @@ def test_cross_track_needs_the_line_not_the_position_along_it(helsinki):
     assert out["sigma"] == 1.0 and abs(wrap(out["heading"] - g.seg_heading[s])) < 1e-12
 
 
+@pytest.mark.slow
 def test_consumer_ekf_with_the_map_through_an_outlier_window():
     """Simulated (labelled): 300 s in central Helsinki, consumer MEMS + magnetometer, σ 10 m
     GNSS with a 90 s white 200 m window, health-checked start. Measured 3.3 m along / 0.49 m
     cross-track RMS (before the line-share test, corner arcs and the level-road prior:
     4.6 / 1.4 m)."""
-    from selfnav import ins
     from selfnav.evaluate import evaluate
     from selfnav.ins.align import robust_init
 

@@ -10,13 +10,13 @@ import pytest
 from selfnav.cli import main
 from selfnav.io.csvio import read_table, write_csv
 from selfnav.roads.hmm import HmmMatcher, _viterbi, node_distances
-from selfnav.roads.graph import packaged_map, project_to_polyline, read_roads
+from selfnav.roads.graph import packaged_map, project_to_polyline
 from selfnav.simulate.car import car_route
 
 
 @pytest.fixture(scope="module")
-def maps():
-    return {n: read_roads(packaged_map(n)) for n in ("kotka_karhula", "helsinki_centre")}
+def maps(karhula, helsinki):
+    return {"kotka_karhula": karhula, "helsinki_centre": helsinki}
 
 
 def floating_car(g, seed, sigma, duration=1800.0, period=5.0):

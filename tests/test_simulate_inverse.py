@@ -1,5 +1,6 @@
 """Exact inverse strapdown (issue 3): increments against independent oracles, round trips."""
 import numpy as np
+import pytest
 
 from selfnav import attitude as att
 from selfnav import earth
@@ -88,6 +89,7 @@ def test_rotation_only_coning_increments_and_attitude_round_trip():
     assert np.linalg.norm(e_noconing) > 30 * np.linalg.norm(e_ours)
 
 
+@pytest.mark.slow
 def test_rotation_only_slow_motion_returns_attitude():
     """Slow tumbling (0.05 Hz): the coning algorithm is then exact enough to see our error."""
     def C_nb(t):
@@ -156,6 +158,7 @@ def test_constant_rate_turn_matches_ecef_oracle():
     np.testing.assert_allclose(truth.lat, lat, atol=1e-13)
 
 
+@pytest.mark.slow
 def test_round_trip_through_strapdown_turn_and_aircraft():
     from selfnav.ins import strapdown as sd
     from selfnav.simulate.aircraft import aircraft_trajectory

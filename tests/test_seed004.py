@@ -39,7 +39,7 @@ def test_pz90_fixes_in_output_on_the_roads(drive):
     """The seed's own case: GNSS in PZ-90 in; every output point lies on a road centre line."""
     sim, g = drive
     f = sim.gnss
-    gd = GnssData(f.t, f.lat, f.lon, f.h, f.sigma_m, None, None, "pz90")
+    gd = f.as_gnss(source="pz90")
     res = run_seed(sim.imu, gd, g, SeedConfig(), gnss_datum="pz90")
     tr = res.trajectory
     assert len(tr.t) > 40 and res.stats["k_m"] == 100
