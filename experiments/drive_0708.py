@@ -1,36 +1,39 @@
-"""Real-data experiments of the INS/GNSS filter (issue 4), reproducible from one function call.
+"""Real drive rtklibexplorer drive_0708 through the navigator with its DEFAULT options (issue 10).
 
-``rtklibexplorer_drive_0708``: a consumer MEMS IMU on a car roof with 4 Hz RTK (cm level; the
-RTK solution is the truth, there is no independent reference). The GNSS given to the filter is
-edited: (i) 30 s outages every 120 s; (ii) a 3-minute window of unflagged outliers of 200 m σ,
-white or slowly drifting (first-order Gauss–Markov, τ = 60 s).
+A consumer MEMS IMU on a car roof with 4 Hz RTK (cm level; the RTK solution is the truth, there
+is no independent reference). The navigator gets the files as a user would give them
+(``selfnav navigate --imu imu_1934.csv --gnss gnss_1934_sf.pos``); only the GNSS is edited:
 
-    python -m experiments.drive_0708 /path/to/shared/data/rtklibexplorer_drive_0708
+* ``all``: every fix;
+* ``outages``: 30 s without fixes every 120 s (error at each outage end);
+* ``white`` / ``gm`` / ``drift``: 3 minutes of unflagged 200 m σ outliers (white; first-order
+  Gauss–Markov, rough; a smooth second-order drift from zero), with the file's velocity kept
+  (``vel=keep``, a receiver whose Doppler is clean) or removed (``vel=drop``, positions only);
+* ``outage3``: the same 3 minutes with no fixes (the dead-reckoning bound);
+* ``shift±0.3``: the IMU stamps shifted by ±0.3 s (the time offset must be found again).
+
+    python experiments/drive_0708.py [DATA_FOLDER] [--scan] [--grades]
+
+``--scan`` places the outlier window at six places with three draws each; ``--grades`` runs
+every ``--grade``. Figures go to README and docs/ekf.md.
 """
 from __future__ import annotations
 
-import dataclasses
-import functools
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
-from selfnav import ins
+import selfnav
 from selfnav.earth import radii
-from selfnav.io.gnss import read_rtklib_pos
-from selfnav.types import GnssData
-from selfnav.io.rtklibexplorer import read_rtklibexplorer_imu
-from selfnav.sensors import outlier_errors
+from selfnav.sensors import with_outages, with_outliers
 
-#: IMU time offset that best aligns this log with the RTK solution (innovation RMS scan
-#: −0.45…+0.1 s; upstream uses −0.125 s): see docs/ekf.md.
-DRIVE0708_T_OFFSET = -0.2
-DRIVE0708_LEVER_ARM_B = np.array([-0.05, 0.0, 0.0])  # antenna − IMU, RFU (upstream config)
+DEFAULT_FOLDER = Path(__file__).resolve().parents[2] / "shared" / "data" / "rtklibexplorer_drive_0708"
+WINDOW_S = 180.0
 
 
-def horizontal_error(traj, truth: GnssData):
+def horizontal_error(traj, truth):
     """Horizontal error (m) of a trajectory against fixes interpolated onto its times."""
     m = (traj.t >= truth.t[0]) & (traj.t <= truth.t[-1])
     t = traj.t[m]
@@ -40,163 +43,109 @@ def horizontal_error(traj, truth: GnssData):
     return t, np.hypot((traj.lat[m] - lat) * rm, (traj.lon[m] - lon) * rn * np.cos(lat))
 
 
-def with_outages(g: GnssData, every=120.0, length=30.0, first=90.0):
-    """Remove ``length`` s of fixes every ``every`` s; returns (gnss, list of outage ends)."""
-    keep = np.ones(len(g.t), bool)
-    ends = []
-    for s in np.arange(g.t[0] + first, g.t[-1] - length, every):
-        keep &= ~((g.t >= s) & (g.t < s + length))
-        ends.append(s + length)
-    return g.select(keep), ends
-
-
-def with_outliers(g: GnssData, start, duration=180.0, sigma=200.0, kind="white", tau=60.0, seed=0):
-    """Add unflagged horizontal outliers in ``[start, start + duration)``; σ in the file unchanged.
-
-    ``kind``: ``"white"``; ``"gm"`` first-order Gauss–Markov (correlated, but rough: 18 m steps
-    between 4 Hz fixes); ``"drift"`` / ``"drift-jump"``: a smooth drift
-    (:func:`selfnav.sensors.drift_errors`) from zero / from its steady state.
-    """
-    rng = np.random.default_rng(seed)
-    out = g.select(np.ones(len(g.t), bool))
-    out.lat, out.lon = g.lat.copy(), g.lon.copy()
-    m = (g.t >= start) & (g.t < start + duration)
-    k = int(m.sum())
-    e = outlier_errors(kind, k, float(np.median(np.diff(g.t))), sigma, tau, rng)
-    rm, rn = radii(g.lat[m])
-    out.lat[m] += e[:, 1] / rm
-    out.lon[m] += e[:, 0] / (rn * np.cos(g.lat[m]))
-    return out
-
-
-def filter_config(grade, **kw):
-    """The filter for a grade; ``consumer-car`` is the hand-tuned setting of the first sessions
-    (consumer noise with VRW ×5, ARW ×3, bias instability ×10, scale factors estimated)."""
-    if grade != "consumer-car":
-        return ins.FilterConfig.for_grade(grade, **kw)
-    base = ins.FilterConfig.for_grade("consumer").imu
-    noise = dataclasses.replace(base, vrw=base.vrw * 5, arw=base.arw * 3,
-                                gyro_bias_instability=base.gyro_bias_instability * 10,
-                                accel_bias_instability=base.accel_bias_instability * 10,
-                                grade="consumer-car (hand-tuned)")
-    return ins.FilterConfig.for_grade("consumer", imu=noise, **kw)
-
-
-@functools.lru_cache(maxsize=2)
-def _load0708(folder: str):
-    """The drive's IMU and RTK solution, read once per folder (a scan runs the filter 48 times;
-    the objects are shared: callers do not modify them)."""
+def load(folder):
     folder = Path(folder)
-    return (read_rtklibexplorer_imu(folder / "imu_1934.csv", t_offset=DRIVE0708_T_OFFSET),
-            read_rtklib_pos(folder / "gnss_1934_sf.pos"))
+    return (selfnav.read_imu(folder / "imu_1934.csv"),
+            selfnav.read_gnss(folder / "gnss_1934_sf.pos"))
 
 
-def drive0708(folder, *, scenarios=("all", "outages", "white", "gm", "drift", "outage3"),
-              smooth=(False, True), grade="consumer-car", outlier_start=200.0, seed=0,
-              **cfg_kw) -> dict:
-    """Run the drive_0708 experiments; returns ``{scenario: {variant: metrics}}``.
-
-    Variants: ``filter`` (real time), ``smoothed`` (RTS), and for outlier scenarios
-    ``filter, no shadows`` (window test, no shadow dead reckoning: :mod:`selfnav.ins.guard`) and
-    ``filter, no window test`` (the plain χ² gate).
-
-    Scenarios: ``all`` fixes; ``outages`` (30 s every 120 s); 3-minute windows of 200 m σ
-    outliers from ``outlier_start`` s: ``white``, ``gm`` (first-order Gauss–Markov, rough),
-    ``drift`` (smooth second-order Gauss–Markov from zero, :func:`selfnav.sensors.drift_errors`);
-    ``outage3``: the same 3 minutes with no fixes at all — the dead-reckoning bound that no
-    real-time filter beats when the outliers carry no information (drifting ones do not).
-    Outlier scenarios also run the filter without the window test and the shadow dead
-    reckoning (``robust=False``: the plain χ² gate).
-    """
-    imu, truth = _load0708(str(Path(folder).resolve()))
-    out = {}
-    for sc in scenarios:
-        ends, win = [], None
-        if sc == "all":
-            g = truth
-        elif sc == "outages":
-            g, ends = with_outages(truth)
-        elif sc in ("white", "gm", "drift", "drift-jump"):
-            win = (truth.t[0] + outlier_start, truth.t[0] + outlier_start + 180.0)
-            g = with_outliers(truth, win[0], kind=sc, seed=seed)
-        elif sc == "outage3":
-            win = (truth.t[0] + outlier_start, truth.t[0] + outlier_start + 180.0)
-            g = truth.select(~((truth.t >= win[0]) & (truth.t < win[1])))
-        else:
-            raise ValueError(sc)
-        # (name, robust, shadows, smooth)
-        variants = [("smoothed" if s else "filter", True, True, s) for s in smooth]
-        if win is not None and sc != "outage3":
-            variants += [("filter, no shadows", True, False, False),
-                         ("filter, no window test", False, False, False)]
-        res_sc = {}
-        for name, robust, guard, sm in variants:
-            kw = dict(dict(robust=robust, use_shadows=guard), **cfg_kw)
-            cfg = filter_config(grade, lever_arm_b=DRIVE0708_LEVER_ARM_B, **kw)
-            t0 = time.perf_counter()
-            res = ins.run_filter(imu, g, cfg, smooth=sm)
-            el = time.perf_counter() - t0
-            t, e = horizontal_error(res.trajectory, truth)
-            m = {"rms_m": float(np.sqrt(np.mean(e**2))), "max_m": float(e.max()),
-                 "seconds": el, "accepted": res.stats["accepted"], "rejected": res.stats["rejected"]}
-            if ends:
-                sig = np.hypot(res.sigma_enu[:, 0], res.sigma_enu[:, 1])
-                idx = [int(np.searchsorted(res.trajectory.t, te)) - 1 for te in ends]
-                m["outage_end_drift_m"] = [float(np.interp(res.trajectory.t[i], t, e)) for i in idx]
-                m["outage_end_sigma_m"] = [float(sig[i]) for i in idx]
-            if win is not None:
-                w = (t >= win[0]) & (t < win[1])
-                m["window_rms_m"] = float(np.sqrt(np.mean(e[w] ** 2)))
-                m["window_max_m"] = float(e[w].max())
-                m["outside_rms_m"] = float(np.sqrt(np.mean(e[~w] ** 2)))
-            res_sc[name] = m
-        out[sc] = res_sc
-    return out
+def scenario_gnss(truth, scenario, *, start=200.0, seed=0, velocity="keep"):
+    """The edited GNSS of a scenario: ``(gnss, outage ends, window)``."""
+    if scenario == "all":
+        return truth, [], None
+    if scenario == "outages":
+        g, ends = with_outages(truth)
+        return g, ends, None
+    win = (truth.t[0] + start, truth.t[0] + start + WINDOW_S)
+    if scenario == "outage3":
+        return truth.select(~((truth.t >= win[0]) & (truth.t < win[1]))), [], win
+    return with_outliers(truth, win[0], WINDOW_S, kind=scenario, seed=seed,
+                         velocity=velocity), [], win
 
 
-def placement_scan(folder, kinds=("white", "gm", "drift", "outage3"),
-                   starts=(100, 150, 200, 250, 300, 350), seeds=(0, 1, 2), **cfg_kw) -> dict:
-    """The 3-minute outlier window at six places in the drive and three outlier draws.
+def metrics(sol, truth, ends=(), win=None):
+    t, e = horizontal_error(sol.trajectory, truth)
+    m = {"rms_m": float(np.sqrt(np.mean(e**2))), "max_m": float(e.max()),
+         "used": sol.stats.get("accepted"), "rejected": sol.stats.get("rejected"),
+         "imu_time_offset_s": sol.stats.get("imu_time_offset_s")}
+    if ends:
+        # the error just before the first fix after the outage
+        m["outage_end_m"] = [float(e[max(0, np.searchsorted(t, te) - 1)]) for te in ends]
+    if win is not None:
+        w = (t >= win[0]) & (t < win[1])
+        after = (t >= win[1] + 30.0)
+        m["window_rms_m"] = float(np.sqrt(np.mean(e[w] ** 2)))
+        m["window_max_m"] = float(e[w].max())
+        m["outside_rms_m"] = float(np.sqrt(np.mean(e[~w] ** 2)))
+        m["after_max_m"] = float(e[after].max()) if after.any() else float("nan")
+    return m
 
-    One placement is one sample of the dead reckoning's luck (its error depends on what the car
-    does in those 3 minutes: straight at 16 m/s or turning in the parking lot); this gives the
-    spread. Returns ``{kind: (N, 3) array of window RMS, window max, outside RMS}``.
-    """
+
+def run(folder=DEFAULT_FOLDER, scenario="all", *, start=200.0, seed=0, velocity="keep",
+        shift=0.0, **navigate_kw):
+    imu, truth = load(folder)
+    if shift:
+        imu = imu.shifted(shift)
+    g, ends, win = scenario_gnss(truth, scenario, start=start, seed=seed, velocity=velocity)
+    t0 = time.perf_counter()
+    sol = selfnav.navigate(imu, g, **navigate_kw)
+    m = metrics(sol, truth, ends, win)
+    m["seconds"] = time.perf_counter() - t0
+    return m
+
+
+def placement_scan(folder=DEFAULT_FOLDER, kinds=("white", "gm", "drift", "outage3"),
+                   starts=(100, 150, 200, 250, 300, 350), seeds=(0, 1, 2), velocity="keep"):
+    """The 3-minute window at six places and three outlier draws (one placement is one sample
+    of the dead reckoning's luck). Returns ``{kind: (N, 4) window RMS, window max, outside
+    RMS, max 30 s after the window}``."""
     out = {}
     for kind in kinds:
         rows = []
         for st in starts:
             for sd in (seeds if kind in ("white", "drift", "drift-jump") else seeds[:1]):
-                r = drive0708(folder, scenarios=(kind,), smooth=(False,), outlier_start=st, seed=sd,
-                              **cfg_kw)[kind]["filter"]
-                rows.append((r["window_rms_m"], r["window_max_m"], r["outside_rms_m"]))
+                r = run(folder, kind, start=st, seed=sd, velocity=velocity)
+                rows.append((r["window_rms_m"], r["window_max_m"], r["outside_rms_m"],
+                             r["after_max_m"]))
         out[kind] = np.array(rows)
     return out
 
 
-def _main(argv):
+def _fmt(name, m):
+    s = f"{name:28s} RMS {m['rms_m']:7.3f} max {m['max_m']:7.2f}"
+    if "window_rms_m" in m:
+        s += (f"  window RMS {m['window_rms_m']:6.1f} max {m['window_max_m']:6.1f}, outside RMS "
+              f"{m['outside_rms_m']:.2f}, max 30 s after {m['after_max_m']:.2f}")
+    if "outage_end_m" in m:
+        s += "  outage ends " + ", ".join(f"{x:.1f}" for x in m["outage_end_m"])
+    return s + f"  ({m['seconds']:.1f} s, time offset {m['imu_time_offset_s']:+.3f} s)"
+
+
+def main(argv):
+    args = [a for a in argv[1:] if not a.startswith("--")]
+    folder = Path(args[0]) if args else DEFAULT_FOLDER
     if "--scan" in argv:
-        argv = [a for a in argv if a != "--scan"]
-        folder = argv[1] if len(argv) > 1 else str(Path(__file__).resolve().parents[3] / "shared" / "data" / "rtklibexplorer_drive_0708")
-        for kind, r in placement_scan(folder).items():
-            print(f"{kind:8s} {len(r)} runs: window RMS median {np.median(r[:, 0]):.1f} m "
-                  f"(max {r[:, 0].max():.1f}), window max median {np.median(r[:, 1]):.1f} m "
-                  f"(max {r[:, 1].max():.1f}; ≤ 40 m in {int(np.sum(r[:, 1] <= 40))}), outside RMS "
-                  f"median {np.median(r[:, 2]):.2f} m (> 1 m in {int(np.sum(r[:, 2] > 1))}, "
-                  f"> 10 m in {int(np.sum(r[:, 2] > 10))})")
+        for vel in ("keep", "drop"):
+            for kind, r in placement_scan(folder, velocity=vel).items():
+                print(f"{kind:8s} vel={vel:4s} {len(r)} runs: window RMS median {np.median(r[:, 0]):.1f} m "
+                      f"(max {r[:, 0].max():.1f}), window max median {np.median(r[:, 1]):.1f} m "
+                      f"(max {r[:, 1].max():.1f}), outside RMS median {np.median(r[:, 2]):.2f} m "
+                      f"(max {r[:, 2].max():.2f}), 30 s after the window max {np.max(r[:, 3]):.2f} m",
+                      flush=True)
         return
-    folder = argv[1] if len(argv) > 1 else str(Path(__file__).resolve().parents[3] / "shared" / "data" / "rtklibexplorer_drive_0708")
-    r = drive0708(folder)
-    for sc, d in r.items():
-        for v, m in d.items():
-            extra = ""
-            if "window_rms_m" in m:
-                extra = (f" window RMS {m['window_rms_m']:.1f} max {m['window_max_m']:.1f}, outside RMS "
-                         f"{m['outside_rms_m']:.2f}")
-            if "outage_end_drift_m" in m:
-                extra = " outage-end drift " + ", ".join(f"{x:.2f}" for x in m["outage_end_drift_m"])
-            print(f"{sc:8s} {v:26s} RMS {m['rms_m']:.2f} max {m['max_m']:.2f} ({m['seconds']:.1f} s){extra}")
+    if "--grades" in argv:
+        for grade in ("auto", "navigation", "tactical", "industrial", "consumer"):
+            print(_fmt(f"all, --grade {grade}", run(folder, "all", grade=grade)), flush=True)
+        return
+    print(_fmt("all", run(folder, "all")), flush=True)
+    for shift in (-0.3, 0.3):
+        print(_fmt(f"all, IMU stamps {shift:+.1f} s", run(folder, "all", shift=shift)), flush=True)
+    print(_fmt("outages", run(folder, "outages")), flush=True)
+    for kind in ("white", "gm", "drift"):
+        for vel in ("keep", "drop"):
+            print(_fmt(f"{kind}, vel={vel}", run(folder, kind, velocity=vel)), flush=True)
+    print(_fmt("outage3", run(folder, "outage3")), flush=True)
 
 
 if __name__ == "__main__":
-    _main(sys.argv)
+    main(sys.argv)

@@ -24,7 +24,7 @@ def test_simulate_navigate_evaluate(sim, tmp_path, capsys):
                           "--out", sol, "--grade", "industrial", "--json"], capsys)
     assert code == 0, err
     d = json.loads(out)
-    assert d["method"] == "ekf" and d["accepted"] > 50 and d["real_time_factor"] > 100
+    assert d["method"] == "ekf" and d["accepted"] > 50
     assert sol.read_text().startswith("# selfnav navigate")
     code, out, err = run(["evaluate", "--truth", sim / "truth.csv", "--solution", sol, "--json"],
                          capsys)

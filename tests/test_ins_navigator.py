@@ -131,35 +131,3 @@ def test_heading_and_road_updates_move_toward_truth():
     rm, _ = radii(lat0, flt.ins.h)
     flt.update_road(np.array([0.0, 1.0]), 4.0, 1.0)
     assert (flt.ins.lat - lat0) * rm == pytest.approx(-4.0 * 25 / 26, rel=1e-3)
-
-
-@pytest.mark.slow
-def test_drive0708_real_data(shared_data):
-    from experiments.drive_0708 import drive0708
-
-    r = drive0708(shared_data / "rtklibexplorer_drive_0708")
-    assert r["all"]["filter"]["rms_m"] < 0.3
-    assert max(r["outages"]["filter"]["outage_end_drift_m"]) < 15.0
-    # outage-end drift within 3σ of the filter's own prediction
-    d = np.array(r["outages"]["filter"]["outage_end_drift_m"])
-    s = np.array(r["outages"]["filter"]["outage_end_sigma_m"])
-    assert np.all(d < 3 * s + 1.0), (d, s)
-    assert max(r["outages"]["smoothed"]["outage_end_drift_m"]) < 1.0
-    w = r["white"]
-    assert w["filter"]["window_rms_m"] < 15.0 and w["filter"]["window_max_m"] < 45.0
-    assert w["filter"]["outside_rms_m"] < 1.0
-    assert w["smoothed"]["window_rms_m"] < 5.0 and w["smoothed"]["window_max_m"] < 12.0
-    assert w["filter, no window test"]["outside_rms_m"] > 2.0
-    gm = r["gm"]
-    assert gm["smoothed"]["window_rms_m"] < 5.0 and gm["smoothed"]["window_max_m"] < 12.0
-    assert gm["smoothed"]["outside_rms_m"] < 1.0
-    assert gm["filter, no window test"]["outside_rms_m"] > 10 * gm["filter"]["outside_rms_m"]
-    # a smooth drift (second-order Gauss–Markov from zero): the shadow dead reckoning keeps the
-    # filter at the dead-reckoning bound (the same 3 minutes with no GNSS at all: outage3);
-    # without the shadows the window test follows the drift (measured 252 m RMS, 69 m after)
-    dr, bound = r["drift"], r["outage3"]["filter"]
-    assert dr["filter"]["window_max_m"] < bound["window_max_m"] + 10.0
-    assert dr["filter"]["window_rms_m"] < bound["window_rms_m"] + 5.0
-    assert dr["filter"]["outside_rms_m"] < 1.0
-    assert dr["filter, no shadows"]["window_rms_m"] > 5 * dr["filter"]["window_rms_m"]
-    assert dr["filter, no shadows"]["outside_rms_m"] > 10.0

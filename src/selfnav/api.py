@@ -7,13 +7,15 @@ numbers. Everything here is re-exported from :mod:`selfnav`.
 """
 from __future__ import annotations
 
+import warnings
 
 import numpy as np
 
 from selfnav import ins
-from selfnav.errors import SelfnavError
+from selfnav.errors import SelfnavError, SelfnavWarning
 from selfnav.evaluate import evaluate as _evaluate_trajectories
 from selfnav.evaluate import load_road_polylines
+from selfnav.ins import calibrate
 from selfnav.ins.align import robust_init
 from selfnav.io.attitude_file import read_attitude
 from selfnav.io.readers import read_gnss, read_imu, read_imu_positions
@@ -28,6 +30,8 @@ from selfnav.solution import Solution, read_solution
 from selfnav.types import GnssData, ImuData, Trajectory
 
 METHODS = ("ekf", "seed")
+#: a run that leaves more of its fixes unused than this warns (one line)
+REJECTION_WARNING = 0.2
 
 
 def estimate_latitude(imu: ImuData, *, method: str = "optimal", **kw) -> LatitudeResult:
@@ -55,29 +59,65 @@ def _check_overlap(imu: ImuData, gnss: GnssData) -> None:
                            "time bases (GPS seconds of week vs seconds of day?)")
 
 
-def filter_config(grade: str = "consumer", *, lever_arm_m=None, nhc_lever_m=None,
+def filter_config(grade: str = "auto", *, lever_arm_m=None, nhc_lever_m=None,
                   window_test: bool = True, nhc: bool = True, shadows: bool = True,
                   mount_states: bool = False, scale_factors: bool | None = None,
                   **fields) -> "ins.FilterConfig":
-    """The filter configuration :func:`navigate` uses for these options (see its parameters);
-    ``fields`` override any :class:`~selfnav.ins.FilterConfig` field by name."""
+    """The filter configuration :func:`navigate` starts from for these options (see its
+    parameters); ``fields`` override any :class:`~selfnav.ins.FilterConfig` field by name.
+
+    ``grade="auto"`` is the consumer preset as the prior (the widest), to be raised to what
+    the data shows; without ``lever_arm_m`` the lever arm is estimated (3 states).
+    """
     opts = dict(robust=window_test, nhc=nhc, use_shadows=shadows, mount_states=mount_states)
     if lever_arm_m is not None:
         opts["lever_arm_b"] = np.asarray(lever_arm_m, dtype=float)
+    else:
+        opts["lever_arm"] = True
     if nhc_lever_m is not None:
         opts["nhc_lever_b"] = np.asarray(nhc_lever_m, dtype=float)
     if scale_factors is not None:
         opts["scale_factors"] = bool(scale_factors)
-    return ins.FilterConfig.for_grade(grade, **opts, **fields)
+    key = "consumer" if str(grade).lower().strip() == "auto" else grade
+    cfg = ins.FilterConfig.for_grade(key, **opts, **fields)
+    if str(grade).lower().strip() == "auto":
+        cfg.imu.grade = "auto (consumer prior)"
+    return cfg
 
 
-def navigate(imu: ImuData, gnss: GnssData, roads=None, *, method: str = "ekf",
-             smooth: bool = False, grade: str = "consumer", config: "ins.FilterConfig | None" = None,
-             lever_arm_m=None, nhc_lever_m=None, window_test: bool = True, nhc: bool = True,
-             shadows: bool = True, mount_states: bool = False, scale_factors: bool | None = None,
+def initial_state(reference, imu: ImuData, cfg: "ins.FilterConfig") -> dict:
+    """The navigator's start from another navigator or a survey (``--init``): the state of
+    ``reference`` (a :class:`Trajectory` or a file :func:`read_solution` reads) at its first
+    epoch inside the IMU record, with the σ of ``cfg.init`` — no GNSS alignment needed."""
+    tr = reference.trajectory if isinstance(reference, Solution) else (
+        reference if isinstance(reference, Trajectory) else read_solution(reference).trajectory)
+    k = int(np.searchsorted(tr.t, imu.t[0] + imu.dt))
+    if k >= len(tr.t):
+        raise SelfnavError(f"the initial-state file ends ({tr.t[-1]:.3f} s) before the IMU "
+                           f"starts ({imu.t[0]:.3f} s): a different time base?")
+    if not (np.all(np.isfinite(tr.velocity_n[k])) and np.all(np.isfinite(tr.C_nb[k]))):
+        raise SelfnavError("the initial-state file needs velocity (ve, vn, vu) and attitude "
+                           "(roll_deg, pitch_deg, heading_deg) as well as position")
+    ini = cfg.init
+    return {"t": float(tr.t[k]), "lat": float(tr.lat[k]), "lon": float(tr.lon[k]),
+            "h": float(tr.h[k]), "velocity_n": tr.velocity_n[k].copy(), "C_nb": tr.C_nb[k].copy(),
+            "sigmas": ([ini.given_pos_sigma] * 3, [ini.given_vel_sigma] * 3,
+                       list(ini.given_att_sigma))}
+
+
+def navigate(imu: ImuData, gnss: GnssData | None, roads=None, *, method: str = "ekf",
+             smooth: bool = False, grade: str = "auto", config: "ins.FilterConfig | None" = None,
+             lever_arm_m=None, nhc_lever_m=None, imu_time_offset_s: float | None = None,
+             window_test: bool = True, nhc: bool = True, shadows: bool = True,
+             mount_states: bool = False, scale_factors: bool | None = None,
              matcher: str = "seed", ins_datum: str = "sk42", declination_deg: float | None = None,
-             progress=None) -> Solution:
+             init=None, progress=None) -> Solution:
     """Navigate a vehicle with an IMU and GNSS, and optionally a road map.
+
+    With the defaults the EKF calibrates itself (DESIGN §10; :mod:`selfnav.ins.calibrate`):
+    the IMU noise from the still segments, the IMU–GNSS time offset from the gyro heading
+    against the GNSS course (then refined as a state), the lever arm as three states, and the
+    process-noise scale online from trusted fixes.
 
     Parameters
     ----------
@@ -90,28 +130,43 @@ def navigate(imu: ImuData, gnss: GnssData, roads=None, *, method: str = "ekf",
     method : {"ekf", "seed"}
         The error-state EKF (+ RTS smoother with ``smooth``), or seed 004's two loops.
     grade : str
-        IMU noise model of the EKF: a grade of :data:`selfnav.sensors.GRADES`.
+        IMU noise prior of the EKF: ``auto`` or a grade of :data:`selfnav.sensors.GRADES`;
+        where the data is noisier, the measured noise wins (one warning says so).
     config : FilterConfig, optional
-        A full filter configuration (then ``grade`` and the switches below are ignored).
+        A full filter configuration (then ``grade`` and the switches below are ignored; the
+        noise is still checked against the data).
     lever_arm_m : (3,), optional
-        IMU → antenna, body RFU, m.
+        IMU → antenna, body RFU, m; not given: estimated (3 states).
     nhc_lever_m : (3,), optional
         IMU → the point where the non-holonomic constraint holds (rear axle), body RFU, m.
+    imu_time_offset_s : float, optional
+        Added to the IMU time stamps (after the reader's own); not given: estimated.
     window_test, nhc, shadows, mount_states, scale_factors : bool
         The outlier window test, the non-holonomic constraint, the shadow dead reckoning,
         the mounting-angle states, the scale-factor states (None: the grade's default).
     matcher, ins_datum, declination_deg :
         ``method="seed"`` options (:class:`selfnav.seed004.SeedConfig`).
+    init : Trajectory, Solution or path, optional
+        Start from this state (:func:`initial_state`) instead of an in-motion alignment
+        from GNSS; then ``gnss`` may be None (free inertial navigation with the vehicle
+        constraints).
     progress : callable(fraction), optional
 
     Returns
     -------
     Solution
-        ``stats`` holds the counts the command line prints (fixes accepted and rejected, ...).
+        ``stats`` holds the counts the command line prints (fixes used and rejected, ...),
+        ``imu_time_offset_s`` (the total offset applied to the IMU stamps, estimate included)
+        and ``lever_arm_m``; ``columns`` the per-row ``sigma_h_m`` and ``gnss`` status.
     """
     if method not in METHODS:
         raise SelfnavError(f"unknown method '{method}' (use {' or '.join(METHODS)})")
-    _check_overlap(imu, gnss)
+    if gnss is None:
+        if init is None:
+            raise SelfnavError("without GNSS the navigator needs an initial state (--init FILE)")
+        gnss = GnssData(np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0), source="none")
+    else:
+        _check_overlap(imu, gnss)
     graph = _as_roads(roads)
     if method == "seed":
         if graph is None:
@@ -125,19 +180,87 @@ def navigate(imu: ImuData, gnss: GnssData, roads=None, *, method: str = "ekf",
     cfg = config or filter_config(grade, lever_arm_m=lever_arm_m, nhc_lever_m=nhc_lever_m,
                                   window_test=window_test, nhc=nhc, shadows=shadows,
                                   mount_states=mount_states, scale_factors=scale_factors)
-    aid = init = None
+    applied = float(imu.meta.get("time_offset_s", 0.0))
+    stats = {}
+    lag = calibrate.estimate_velocity_lag(gnss) if cfg.gnss.use_velocity and len(gnss) else None
+    if lag:
+        gnss = calibrate.shift_velocity(gnss, lag)
+        stats["gnss_velocity_lag_s"] = lag
+    if imu_time_offset_s is None and len(gnss):
+        est = calibrate.estimate_time_offset(imu, gnss)
+        if est is not None:
+            imu = imu.shifted(est[0])
+            applied += est[0]
+            cfg = cfg.updated(time_offset=True, time_offset_sigma=max(3 * est[1], 0.01))
+            stats["imu_time_offset_prepass_s"] = est[0]
+        else:
+            cfg = cfg.updated(time_offset=True, time_offset_sigma=0.1)
+    elif imu_time_offset_s:
+        imu = imu.shifted(float(imu_time_offset_s))
+        applied += float(imu_time_offset_s)
+    cfg, measured, notes = calibrate.calibrated_config(cfg, imu, gnss)
+    if notes and str(grade).lower() != "auto" and config is None:
+        warnings.warn(f"the IMU is noisier than the '{grade}' preset says ({'; '.join(notes)}): "
+                      "using the measured noise", SelfnavWarning, stacklevel=2)
+    aid = None
     if graph is not None:
         aid = EkfRoadAid(graph, gnss)
-        init = robust_init(imu, gnss)
-    res = ins.run_filter(imu, gnss, cfg, init=init, smooth=smooth, progress=progress,
+    if init is not None:
+        start = initial_state(init, imu, cfg)
+    else:
+        # start only after a run of fixes that look healthy without an INS (an outlier window
+        # at start-up must not seed the navigator hundreds of metres off)
+        start = robust_init(imu, gnss, cfg=cfg)
+    res = ins.run_filter(imu, gnss, cfg, init=start, smooth=smooth, progress=progress,
                          road_aid=aid)
-    stats = dict(res.stats)
+    # without a given lever arm, the antenna is the point the data defines (the lever arm is
+    # an estimate); rows at true time (the residual time-offset state)
+    point = "antenna" if cfg.states.lever_arm else "imu"
+    traj = ins.output_trajectory(res, antenna=point == "antenna")
+    if res.time_offset is not None:
+        applied += float(res.time_offset[-1])
+    stats["position_of"] = point
+    stats.update(res.stats)
     stats["suspect_fixes"] = int(np.sum(res.mode == 1))
     stats["smoothed"] = bool(res.smoothed)
+    stats["imu_time_offset_s"] = applied
+    stats["imu_time_offset_format_s"] = float(imu.meta.get("format_time_offset_s", 0.0))
+    stats["lever_arm_m"] = [float(x) for x in (res.lever_arm[-1] if res.lever_arm is not None
+                                               else cfg.gnss.lever_arm_b)]
+    stats["noise"] = {"grade": cfg.imu.grade, "arw_deg_per_sqrt_h": float(np.degrees(cfg.imu.arw) * 60),
+                      "vrw_m_per_s_per_sqrt_h": float(cfg.imu.vrw * 60),
+                      "still_s": measured.still_s, "raised": notes}
     if res.mounting is not None and len(res.mounting):
         stats["mounting_deg"] = [float(x) for x in np.degrees(res.mounting[-1])]
-    return Solution(res.trajectory, res.sigma_enu, {}, stats,
-                    "ekf+map" if graph is not None else "ekf", res)
+    st = res.fix_log["status"]
+    used = np.isin(st, ("used", "used-h", "used-v"))
+    stats["rejection_rate"] = float(1.0 - used.sum() / max(1, np.sum(st != "before-init"))) if len(st) else 0.0
+    if stats["rejection_rate"] > REJECTION_WARNING and len(st) >= 20:
+        warnings.warn(f"{100 * stats['rejection_rate']:.0f} % of the GNSS fixes were not used: the "
+                      "fixes and the IMU disagree (outliers, wrong lever arm or time base, or a "
+                      "noise model too optimistic); see --fix-log", SelfnavWarning, stacklevel=2)
+    cols = {"sigma_h_m": res.sigma_h, "gnss": res.gnss_status}
+    return Solution(traj, res.sigma_enu, cols, stats, "ekf+map" if graph is not None else "ekf",
+                    res)
+
+
+def write_fix_log(path, solution: Solution):
+    """One row per GNSS fix of a navigator run: ``t, status, reason, nis_h, nis_v, nis_vel,
+    anchored`` (written atomically)."""
+    from selfnav.io.csvio import write_csv
+
+    log = getattr(solution.detail, "fix_log", None)
+    if log is None:
+        raise SelfnavError("this method keeps no fix log (use --method ekf)")
+    cols = {"t": log["t"], "status": log["status"],
+            "reason": np.array([str(r).replace(",", ";") or "-" for r in log["reason"]], dtype=object),
+            "nis_h": log["nis_h"], "nis_v": log["nis_v"], "nis_vel": log["nis_vel"],
+            "anchored": np.asarray(log["anchored"], int)}
+    return write_csv(path, cols, comments=["selfnav navigate: one row per GNSS fix",
+                                           "status: used, used-h (height rejected), used-v (height "
+                                           "only), degraded, rejected, before-init"],
+                     fmt={"t": "%.3f", "nis_h": "%.4g", "nis_v": "%.4g", "nis_vel": "%.4g",
+                          "anchored": "%d"})
 
 
 def match(gnss: GnssData, roads, *, sigma_m: float = 10.0, radius_m: float | None = None,
@@ -185,4 +308,4 @@ def evaluate(truth, solution, *, roads=None) -> dict:
 
 __all__ = ["read_imu", "read_imu_positions", "read_gnss", "read_roads", "read_solution",
            "read_attitude", "estimate_latitude", "navigate", "match", "evaluate",
-           "filter_config", "Solution"]
+           "filter_config", "initial_state", "write_fix_log", "Solution"]

@@ -9,6 +9,7 @@ GOST 32453-2017 (PZ-90.11); Krasovsky 1940 ellipsoid (SK-42).
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -203,7 +204,14 @@ def enu_to_geodetic(enu, lat0, lon0, h0=0.0, ellipsoid: Ellipsoid = WGS84):
 
 def enu_offset(lat0, lon0, h0, lat, lon, h, ellipsoid: Ellipsoid = WGS84):
     """ENU metres of (lat, lon, h) from (lat0, lon0, h0), small-offset form (curvature radii
-    at the origin; exact to ~1e-7 relative over a few km). Arrays broadcast to (..., 3)."""
+    at the origin; exact to ~1e-7 relative over a few km). Arrays broadcast to (..., 3); all
+    scalars give a (3,) array by a fast path (the filter calls this at every epoch)."""
+    if all(isinstance(x, (float, int, np.floating)) for x in (lat0, lon0, h0, lat, lon, h)):
+        s2 = math.sin(lat0) ** 2
+        w = math.sqrt(1.0 - ellipsoid.e2 * s2)
+        rn = ellipsoid.a / w + h0
+        rm = ellipsoid.a * (1.0 - ellipsoid.e2) / (w * w * w) + h0
+        return np.array([(lon - lon0) * rn * math.cos(lat0), (lat - lat0) * rm, h - h0])
     rm, rn = radii(lat0, h0, ellipsoid)
     return np.stack(np.broadcast_arrays((np.asarray(lon) - lon0) * rn * np.cos(lat0),
                                         (np.asarray(lat) - lat0) * rm,

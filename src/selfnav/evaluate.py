@@ -240,10 +240,31 @@ def evaluate(truth: Trajectory, solution: Trajectory, *, roads=None,
         if far.any():
             warnings.append(f"{int(far.sum())} truth points are more than 50 m from any road")
     m = error_metrics(e, along, cross, ra, rc)
+    m.update(motion_metrics(truth, solution, t, inside))
     m.update({"samples": int(len(t)), "duration_s": float(t[-1] - t[0]),
               "solution_samples": int(len(solution)), "t_start_s": float(t[0]),
               "t_end_s": float(t[-1])})
     return Evaluation(t, e, along, cross, tl, tlon, th, sl, slon, sh, hdg, ra, rc, m, warnings)
+
+
+def motion_metrics(truth: Trajectory, solution: Trajectory, t, inside) -> dict:
+    """Velocity and attitude errors where both files have them (the keys are left out
+    otherwise): horizontal/vertical velocity RMS (m/s), roll, pitch and heading RMS (deg);
+    the heading error is wrapped to ±180°."""
+    out = {}
+    tv, sv = truth.velocity_n, solution.velocity_n[inside]
+    if np.all(np.isfinite(tv)) and np.all(np.isfinite(sv)):
+        dv = sv - np.column_stack([np.interp(t, truth.t, tv[:, k]) for k in range(3)])
+        out["velocity_horizontal_rms_m_s"] = _rms(np.hypot(dv[:, 0], dv[:, 1]))
+        out["velocity_vertical_rms_m_s"] = _rms(dv[:, 2])
+    if np.all(np.isfinite(truth.C_nb)) and np.all(np.isfinite(solution.C_nb[inside])):
+        rt, pt, ht = att.euler_from_dcm_nb(truth.C_nb)
+        rs, ps, hs = att.euler_from_dcm_nb(solution.C_nb[inside])
+        for name, a_t, a_s in (("roll", rt, rs), ("pitch", pt, ps), ("heading", ht, hs)):
+            d = np.angle(np.exp(1j * (a_s - _interp_angle(t, truth.t, a_t))))
+            out[f"{name}_rms_deg"] = _rms(np.degrees(d))
+            out[f"{name}_mean_deg"] = float(np.degrees(np.nanmean(d)))
+    return out
 
 
 def load_road_polylines(path):

@@ -549,3 +549,45 @@ class GnssModel:
             lat_m, lon_m, h_m = _datum.convert(lat_m, lon_m, h_m, "wgs84", self.datum)
         return GnssFixes(t, lat_m, np.angle(np.exp(1j * lon_m)), h_m, np.full(n, self.sigma_h),
                          vel_m, err, outlier, spike, list(self.outliers), self.datum)
+
+
+# ---------------------------------------------------------------- editing real GNSS
+
+def with_outages(g: GnssData, every=120.0, length=30.0, first=90.0):
+    """Remove ``length`` s of fixes every ``every`` s from ``first`` s on; returns
+    ``(gnss, list of outage end times)``."""
+    keep = np.ones(len(g.t), bool)
+    ends = []
+    for s in np.arange(g.t[0] + first, g.t[-1] - length, every):
+        keep &= ~((g.t >= s) & (g.t < s + length))
+        ends.append(float(s + length))
+    return g.select(keep), ends
+
+
+def with_outliers(g: GnssData, start, duration=180.0, sigma=200.0, kind="white", tau=60.0,
+                  seed=0, *, velocity: str = "keep"):
+    """Unflagged horizontal outliers in ``[start, start + duration)`` (:func:`outlier_errors`
+    of ``kind``); the σ in the file is unchanged, so nothing flags them.
+
+    ``velocity``: ``"keep"`` the file's velocity (a receiver whose Doppler is clean while its
+    positions are not), ``"drop"`` every velocity (positions only), or ``"consistent"``: the
+    velocity carries the outliers' own rate (a spoofer or a drift that fools both).
+    """
+    rng = np.random.default_rng(seed)
+    out = g.copy()
+    m = (g.t >= start) & (g.t < start + duration)
+    k = int(m.sum())
+    dt = float(np.median(np.diff(g.t)))
+    e = outlier_errors(kind, k, dt, sigma, tau, rng)
+    rm, rn = radii(g.lat[m])
+    out.lat[m] = g.lat[m] + e[:, 1] / rm
+    out.lon[m] = g.lon[m] + e[:, 0] / (rn * np.cos(g.lat[m]))
+    if velocity == "drop":
+        out.velocity_n = None
+        out.sigma_vel_mps = None
+    elif velocity == "consistent" and g.velocity_n is not None and k > 1:
+        rate = np.gradient(e, g.t[m], axis=0)
+        out.velocity_n[m, :2] = g.velocity_n[m, :2] + rate
+    elif velocity not in ("keep", "consistent"):
+        raise SelfnavError(f"velocity must be keep, drop or consistent, got '{velocity}'")
+    return out

@@ -16,6 +16,7 @@ import numpy as np
 from selfnav import attitude as att
 from selfnav import datum as dm
 from selfnav.io.csvio import read_table, write_csv
+from selfnav.io.psins_mat import header_of
 from selfnav.io.trajectory import TRUTH_COLUMNS, read_truth
 from selfnav.types import Trajectory
 
@@ -92,7 +93,7 @@ class Solution:
 
     def to_csv(self, path, *, datum: str = "wgs84", comments=()) -> Path:
         """Write the solution file atomically (DESIGN §6); returns the path."""
-        fmt = {"t": "%.4f", "lat_deg": "%.9f", "lon_deg": "%.9f", "h_m": "%.3f",
+        fmt = {"t": "%.6f", "lat_deg": "%.9f", "lon_deg": "%.9f", "h_m": "%.3f",
                **EXTRA_FORMATS}
         return write_csv(path, self.table(datum), comments=[*comments, f"datum {datum}"],
                          fmt=fmt)
@@ -102,6 +103,8 @@ def read_solution(path) -> Solution:
     """Read a solution (or truth) CSV; ``sigma_e_m, sigma_n_m, sigma_u_m`` become ``sigma_enu``
     and other known per-row columns go to ``columns``."""
     tr = read_truth(path)
+    if str(path).lower().endswith(".pos") or "t" not in header_of(path):
+        return Solution(tr, None, {}, {}, "file")     # a reference in another format
     extra = read_table(path, ("t",), optional=tuple(EXTRA_FORMATS))
     sig = None
     if all(k in extra for k in ("sigma_e_m", "sigma_n_m", "sigma_u_m")):

@@ -86,6 +86,7 @@ class GnssData:
     quality : (N,) int or None (RTKLIB Q: 1 fix, 2 float, 5 single, ...)
     source : str
     sigma_v_m : (N,) vertical σ, m, or None (then 1.5 × the horizontal one)
+    sigma_vel_mps : (N,) velocity σ per horizontal axis, m/s, or None (not given)
     """
 
     t: np.ndarray
@@ -97,13 +98,14 @@ class GnssData:
     quality: np.ndarray | None = None
     source: str = ""
     sigma_v_m: np.ndarray | None = None
+    sigma_vel_mps: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.t)
 
     @classmethod
     def from_arrays(cls, t, lat, lon, h, sigma_m=None, velocity_n=None, *, source="",
-                    quality=None, sigma_v_m=None) -> "GnssData":
+                    quality=None, sigma_v_m=None, sigma_vel_mps=None) -> "GnssData":
         """Fixes from array-likes (radians); a scalar ``sigma_m`` applies to every fix."""
         t = np.asarray(t, dtype=float)
         sig = None if sigma_m is None else np.broadcast_to(
@@ -112,13 +114,15 @@ class GnssData:
                    np.asarray(h, dtype=float), sig,
                    None if velocity_n is None else np.asarray(velocity_n, dtype=float),
                    None if quality is None else np.asarray(quality), source,
-                   None if sigma_v_m is None else np.asarray(sigma_v_m, dtype=float))
+                   None if sigma_v_m is None else np.asarray(sigma_v_m, dtype=float),
+                   None if sigma_vel_mps is None else np.asarray(sigma_vel_mps, dtype=float))
 
     def select(self, mask) -> "GnssData":
         """A subset of the fixes (index array, slice or boolean mask)."""
         return GnssData(self.t[mask], self.lat[mask], self.lon[mask], self.h[mask],
                         _take(self.sigma_m, mask), _take(self.velocity_n, mask),
-                        _take(self.quality, mask), self.source, _take(self.sigma_v_m, mask))
+                        _take(self.quality, mask), self.source, _take(self.sigma_v_m, mask),
+                        _take(self.sigma_vel_mps, mask))
 
     def copy(self) -> "GnssData":
         return self.select(np.ones(len(self.t), bool))

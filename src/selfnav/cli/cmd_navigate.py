@@ -39,7 +39,12 @@ def register(app: typer.Typer) -> None:
     @app.command("navigate")
     def navigate_cmd(
         imu: Path = typer.Option(..., "--imu", help="IMU file."),
-        gnss: Path = typer.Option(..., "--gnss", help="GNSS fixes (csv, RTKLIB .pos, NMEA)."),
+        gnss: Optional[Path] = typer.Option(None, "--gnss", help="GNSS fixes (csv, RTKLIB .pos, "
+                                            "NMEA, PSINS avp csv); optional with --init."),
+        init: Optional[Path] = typer.Option(None, "--init", help="Start from the state of this "
+                                            "trajectory file (truth/solution CSV, RTKLIB .pos with "
+                                            "no attitude excluded, PSINS avp) at the IMU start, "
+                                            "instead of aligning from GNSS."),
         out: Path = typer.Option(..., "--out", help="Solution CSV (written atomically)."),
         method: str = typer.Option("ekf", help="ekf (error-state Kalman filter) or seed."),
         map_: Optional[Path] = typer.Option(None, "--map", help="Road map (.osm/.osm.pbf)."),
@@ -49,10 +54,19 @@ def register(app: typer.Typer) -> None:
         gnss_format: str = typer.Option("auto", help="csv, pos, nmea, auto (by extension)."),
         gnss_datum: str = typer.Option("wgs84", help="Datum of the GNSS file: wgs84, pz90.11, pz90, sk42."),
         out_datum: str = typer.Option("wgs84", help="Datum of the solution file."),
-        grade: str = typer.Option("consumer", help="IMU noise model: navigation, tactical, "
-                                  "industrial, consumer."),
-        lever_arm: str = typer.Option("0,0,0", help="IMU-to-antenna lever arm, body RFU, m: x,y,z."),
-        imu_time_offset: float = typer.Option(0.0, help="Added to the IMU time stamps, s."),
+        grade: str = typer.Option("auto", help="IMU noise prior: auto (measured from the data), "
+                                  "navigation, tactical, industrial, consumer; where the data is "
+                                  "noisier than a preset, the measured noise is used (a warning "
+                                  "says so)."),
+        lever_arm: Optional[str] = typer.Option(None, help="IMU-to-antenna lever arm, body RFU, "
+                                                "m: x,y,z (default: estimated, and the solution "
+                                                "is the antenna's position)."),
+        imu_time_offset: Optional[float] = typer.Option(None, help="Added to the IMU time "
+                                                        "stamps after the reader's own (the "
+                                                        "rtklibexplorer format applies upstream's "
+                                                        "-0.125 s), s (default: estimated)."),
+        fix_log: Optional[Path] = typer.Option(None, "--fix-log", help="Write one row per GNSS "
+                                               "fix: t, status, reason, NIS."),
         window_test: bool = typer.Option(True, "--window-test/--no-window-test",
                                          help="The outlier window test (off: only the χ² gate)."),
         nhc: bool = typer.Option(True, "--nhc/--no-nhc", help="Non-holonomic constraint (a car)."),
@@ -75,8 +89,10 @@ def register(app: typer.Typer) -> None:
         """Navigate with an IMU and GNSS; survives unflagged GNSS outliers (window test)."""
         from selfnav import api
 
-        data = _magnetometer(api.read_imu(imu, imu_format, time_offset_s=imu_time_offset), mag)
-        g = api.read_gnss(gnss, gnss_format, gnss_datum)
+        data = _magnetometer(api.read_imu(imu, imu_format), mag)
+        if gnss is None and init is None:
+            raise SelfnavError("navigate needs --gnss FILE (or an initial state: --init FILE)")
+        g = api.read_gnss(gnss, gnss_format, gnss_datum) if gnss is not None else None
         graph = api.read_roads(map_) if map_ is not None else None
         t0 = time.perf_counter()
         progress = bar = None
@@ -89,12 +105,13 @@ def register(app: typer.Typer) -> None:
             progress = lambda x: bar.update(task, completed=x)  # noqa: E731
         try:
             sol = api.navigate(data, g, graph, method=method, smooth=smooth, grade=grade,
-                               lever_arm_m=_vec3(lever_arm, "--lever-arm"),
+                               lever_arm_m=None if lever_arm is None else _vec3(lever_arm, "--lever-arm"),
+                               imu_time_offset_s=imu_time_offset,
                                nhc_lever_m=_vec3(nhc_lever, "--nhc-lever"),
                                window_test=window_test, nhc=nhc, shadows=shadows,
                                mount_states=mount_states, scale_factors=scale_factors or None,
                                matcher=matcher, ins_datum=ins_datum,
-                               declination_deg=declination_deg, progress=progress)
+                               declination_deg=declination_deg, init=init, progress=progress)
         finally:
             if bar is not None:
                 bar.stop()
@@ -102,7 +119,9 @@ def register(app: typer.Typer) -> None:
         sol.to_csv(out, datum=out_datum, comments=[
             f"selfnav navigate --method {method}{' --smooth' if smooth else ''}"
             f"{' --map ' + map_.name if map_ is not None else ''}; imu {imu.name}; "
-            f"gnss {gnss.name}"])
+            f"gnss {gnss.name if gnss is not None else 'none'}"])
+        if fix_log is not None:
+            api.write_fix_log(fix_log, sol)
         span = float(data.t[-1] - data.t[0])
         summary = {"method": method, "map": None if map_ is None else str(map_),
                    "epochs": len(sol), "imu_samples": len(data), "duration_s": span,
@@ -118,9 +137,12 @@ def register(app: typer.Typer) -> None:
             print(f"  seed 004 slow loop ({matcher}): k_M {s['k_m']}, "
                   f"{s['healthy_fixes']} fixes judged healthy")
             return
-        print(f"  GNSS fixes: {s['accepted']} accepted, {s['rejected']} rejected, "
+        print(f"  GNSS fixes: {s['accepted']} used, {s['rejected']} rejected, "
               f"{s['before_init']} before initialisation, "
               f"{s['degraded_updates']} used with inflated σ while suspect")
+        print(f"  IMU time offset {s['imu_time_offset_s']:+.3f} s (applied to its stamps, "
+              f"estimate included); lever arm {', '.join(f'{x:.2f}' for x in s['lever_arm_m'])} m "
+              f"(RFU); solution at the {s['position_of']}")
         if s.get("shadow_resets"):
             print(f"  drifting GNSS caught: {s['shadow_resets']} reset(s) to the shadow "
                   "dead reckoning")

@@ -10,7 +10,8 @@ imports only those to its left (and ``config``).
 """
 from selfnav.ins.config import FilterConfig
 from selfnav.ins.ekf import InsGnssFilter
-from selfnav.ins.navigator import FilterResult, StreamingNavigator, init_from_gnss, run_filter
+from selfnav.ins.navigator import (FilterResult, StreamingNavigator, fixes_sigma,
+                                  init_from_gnss, output_trajectory, run_filter)
 
 __all__ = ["FilterConfig", "InsGnssFilter", "FilterResult", "StreamingNavigator",
-           "init_from_gnss", "run_filter"]
+           "init_from_gnss", "run_filter", "output_trajectory", "fixes_sigma"]

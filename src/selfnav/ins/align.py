@@ -566,24 +566,28 @@ def healthy_start(t, xy, sigma, window=20):
     return None
 
 
-def robust_init(imu, gnss, graph=None, *, sigma=10.0, window=20):
+def robust_init(imu, gnss, graph=None, *, sigma=10.0, window=20, cfg: FilterConfig | None = None):
     """The in-motion alignment (:func:`init_from_gnss`) started only after the first
     run of healthy fixes (:func:`healthy_start`): an outlier window at start-up (seed 004: up
     to 5 min, 200 m σ, white or drifting) must not seed the navigator hundreds of metres off.
-    ``gnss`` is WGS-84. With ``graph`` the heading is the nearest road direction and the
-    vertical velocity zero (seed (15) at the start)."""
+    ``gnss`` is WGS-84; ``sigma`` stands for a fix without σ; with ``cfg`` the σ the filter
+    believes (its floor) is used. No healthy run at all: the alignment over every fix. With
+    ``graph`` the heading is the nearest road direction and the vertical velocity zero
+    (seed (15) at the start)."""
+    fc = cfg if cfg is not None else FilterConfig.for_grade("consumer")
+    fc = fc.updated(window=max(fc.outliers.window, 15))
     sig = (np.asarray(gnss.sigma_m, float) if gnss.sigma_m is not None
            else np.full(len(gnss.t), np.nan))
     sig = np.where(np.isfinite(sig), sig, sigma)
+    if cfg is not None:
+        sig = np.maximum(sig, cfg.gnss.sigma_floor)
     xy = enu_offset(gnss.lat[0], gnss.lon[0], 0.0, gnss.lat, gnss.lon, 0.0)[:, :2]
     k = healthy_start(gnss.t, xy, sig, window)
     if k is None:
-        raise SelfnavError(f"no run of {window} healthy GNSS fixes to start from (outliers "
-                           "throughout?)")
+        return dict(init_from_gnss(imu, gnss, fc, sig))
     sub = slice(k, None)
     g2 = gnss.select(sub)
     g2.sigma_m = sig[sub]
-    fc = FilterConfig.for_grade("consumer", window=15)
     init = dict(init_from_gnss(imu, g2, fc, sig[sub]))
     if graph is not None:
         r0, _, k0 = att.euler_from_dcm_nb(init["C_nb"])

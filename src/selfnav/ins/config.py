@@ -59,6 +59,8 @@ class ImuNoise:
     instability_tau : correlation time of that variation, s
     gyro_sf_sigma, accel_sf_sigma : scale-factor σ (fraction), with ``states.scale_factors``
     grade : where the numbers came from (a grade name, "measured", ...)
+    adapt : adapt the process-noise scale online from trusted fixes
+        (:class:`selfnav.ins.calibrate.NoiseAdapter`)
     """
 
     arw: float = 0.15 * DEG / 60.0
@@ -73,6 +75,7 @@ class ImuNoise:
     gyro_sf_sigma: float = 0.01
     accel_sf_sigma: float = 0.01
     grade: str = "industrial"
+    adapt: bool = True
 
     @classmethod
     def from_model(cls, model: "sensors.ImuErrorModel", grade: str = "") -> "ImuNoise":
@@ -116,12 +119,26 @@ class StateOptions:
     mount_states : the IMU's pitch and yaw relative to the vehicle, seen by the NHC (+2)
     mount_rad : known (initial) mounting pitch and yaw, rad
     mount_sigma : their initial σ, rad
+    mount_rw : their random walk, rad/√s (a mount that settles)
+    lever_arm : the IMU → antenna lever arm (+3), from ``gnss.lever_arm_b``
+    lever_arm_sigma : its initial σ per axis, m
+    lever_arm_rw : its random walk, m/√s
+    time_offset : the residual IMU time offset (+1), s, left by the data pre-pass
+    time_offset_sigma : its initial σ, s
+    time_offset_rw : its random walk, s/√s (clock drift)
     """
 
     scale_factors: bool = False
     mount_states: bool = False
     mount_rad: tuple = (0.0, 0.0)
     mount_sigma: float = 2.0 * DEG
+    mount_rw: float = 0.0
+    lever_arm: bool = False
+    lever_arm_sigma: float = 0.5
+    lever_arm_rw: float = 0.0
+    time_offset: bool = False
+    time_offset_sigma: float = 0.05
+    time_offset_rw: float = 1e-5
 
 
 @dataclass
@@ -134,6 +151,8 @@ class Initialisation:
     att_sigma : roll, pitch, heading σ, rad
     min_speed : the GNSS course gives the heading above this speed, m/s
     max_accel : bounded-acceleration motion model of the start-up consistency test, m/s²
+    given_pos_sigma, given_vel_sigma, given_att_sigma : σ of a state given by another
+        navigator or a survey (``--init``): m, m/s, (roll, pitch, heading) rad
     """
 
     pos_sigma: float = 10.0
@@ -141,6 +160,9 @@ class Initialisation:
     att_sigma: tuple = (2.0 * DEG, 2.0 * DEG, 10.0 * DEG)
     min_speed: float = 5.0
     max_accel: float = 5.0
+    given_pos_sigma: float = 1.0
+    given_vel_sigma: float = 0.1
+    given_att_sigma: tuple = (1.0 * DEG, 1.0 * DEG, 3.0 * DEG)
 
 
 @dataclass
@@ -164,8 +186,9 @@ class GnssAiding:
     sigma_floor: float = 0.1
     default_sigma: float = 5.0
     vertical_ratio: float = 1.5
-    use_velocity: bool = False
+    use_velocity: bool = True
     velocity_sigma: float = 0.1
+    velocity_floor: float = 0.05
 
 
 @dataclass
@@ -223,6 +246,10 @@ class OutlierDefence:
     white_rho_max : lag-1 autocorrelation above which suspect fixes are not white
     white_ratio_min : the fix-to-fix scale must be at least this share of the scale about the
         median (equal for white noise, far smaller for a drift)
+    reinit_after : s of fixes that fit one smooth track by themselves but not the INS
+        displacement (the INS, not the fixes, is lost) before the INS is re-initialised
+        from them
+    reinit_span : s of fixes the re-initialisation fits
     """
 
     robust: bool = True
@@ -238,6 +265,8 @@ class OutlierDefence:
     degraded_min_ratio: float = 3.0
     white_rho_max: float = 0.3
     white_ratio_min: float = 0.8
+    reinit_after: float = 20.0
+    reinit_span: float = 10.0
 
 
 @dataclass

@@ -1,43 +1,55 @@
-"""Loosely coupled INS/GNSS error-state Kalman filter, RTS smoother and outlier defence (DESIGN §5, §7).
+"""Loosely coupled INS/GNSS error-state Kalman filter and RTS smoother (DESIGN §5, §7).
 
 The nominal state is carried by the strapdown mechanization (:class:`selfnav.ins.strapdown.Strapdown`,
 seed 004 fast loop); the filter estimates its errors
 
     δx = [δr (ENU, m), δv (ENU, m/s), ψ (rad), δb_g (rad/s), δb_a (m/s²)]        (15 states)
-         [+ δs_g, δs_a (scale factors, 6)] [+ δμ (IMU pitch and yaw to the vehicle, 2)]
+         [+ δs_g, δs_a]   gyro and accelerometer scale factors (6)
+         [+ δμ]           IMU pitch and yaw relative to the vehicle (2)
+         [+ δl]           IMU → antenna lever arm, body RFU, m (3)
+         [+ δε]           IMU time offset, s (1)
 
-with ``δ(·) = estimated − true`` and the attitude error ``C̃_b^n = (I − [ψ]) C_b^n``. Error
-dynamics (psi-angle form, Groves ch. 14, simplified to what a MEMS or tactical IMU needs)::
+with ``δ(·) = estimated − true`` and the attitude error ``C̃_b^n = (I − [ψ]) C_b^n``. Which
+optional blocks exist is the :class:`StateLayout` of the configuration. Error dynamics
+(psi-angle form, Groves ch. 14, simplified to what a MEMS or tactical IMU needs)::
 
     δṙ = δv,                       plus  δv̇_U += (2g/R) δr_U (the unstable vertical channel)
-    δv̇ = f^n × ψ − (2ω_ie + ω_en) × δv − C_b^n δb_a
-    ψ̇ = −ω_in × ψ + C_b^n δb_g
+    δv̇ = f^n × ψ − (2ω_ie + ω_en) × δv − C_b^n (δb_a + diag(f_b) δs_a)
+    ψ̇ = −ω_in × ψ + C_b^n (δb_g + diag(ω_b) δs_g)
     δḃ = −δb/τ + w                 (τ = ∞ by default: a turn-on constant plus a random walk
                                     whose density matches the bias instability)
+    δμ̇ = δl̇ = δε̇ = 0 (+ a small random walk)
 
-Aiding: GNSS position with lever arm, GNSS velocity, non-holonomic constraint (a car does not
-slide sideways or jump), zero-velocity updates when the IMU is still, magnetometer heading.
+The process noise is ``λ Q`` with ``λ`` the noise scale that :mod:`selfnav.ins.calibrate`
+adapts to the data (1 for a trusted noise model).
+
+**GNSS position** at the antenna, with the time offset: the IMU stamps plus ``ε`` are true
+time, so the INS state of stamp ``t`` is the truth at ``t + ε``; the fix at ``t_k`` is
+compared with the INS shifted back by ``ε̂``::
+
+    h(x) = r_INS − v^n ε̂ + C_b^n l̂,   ∂h/∂δr = I, ∂h/∂ψ = [C_b^n l̂ ×], ∂h/∂δl = C_b^n,
+                                      ∂h/∂δε = −v^n
+
+**GNSS velocity** at the antenna: ``v^n + C_b^n (ω_b × l̂)``.
 
 The non-holonomic constraint holds in the *vehicle* frame at a point that does not slip
 sideways (the rear-axle centre), not at the IMU: ``v_v = C_vb (C_bn^T v^n + ω_b × l_nhc)``
 with ``C_vb = exp([μ×])``, μ = (pitch, 0, yaw) of the IMU relative to the vehicle (small angles,
 positive nose-up and to the left). Unmodelled, a 0.5° mounting pitch makes the NHC tilt the INS
 by 0.5° while GNSS is out (a g·0.5° = 0.09 m/s² along-track error), and a 1.5 m lever turns
-a 0.5 rad/s parking turn into 0.75 m/s of "side slip"; ``mount_states`` estimates μ,
-``nhc_lever_b`` gives the lever.
+a 0.5 rad/s parking turn into 0.75 m/s of "side slip".
 
-**Outliers nothing flags** (seed 004: up to 5 min at 200 m σ; DESIGN §7). A χ² innovation gate
-alone fails: while it rejects, P grows, and after a minute or two every outlier passes. selfnav
-keeps the gate and adds a window test that P cannot weaken: consecutive fixes must agree with
-each other *through the INS displacement* (short-term INS displacement is accurate to
-centimetres even when its absolute position has drifted). After a run of rejections the filter
-is in *suspect* mode: it dead-reckons (INS + vehicle constraints) and re-acquires only when a
-window of fixes is internally consistent at the nominal σ and its common offset is consistent
-with the dead-reckoning uncertainty. At start-up the same test (with a bounded-acceleration
-motion model instead of the INS) chooses the first trusted fixes.
+The covariance propagation and the Joseph-form update are numba kernels: the filter is a
+Python loop over epochs (5 Hz aiding, the GNSS rate), and each epoch is a few compiled calls.
+The outlier defence that decides which fixes to use lives in :mod:`selfnav.ins.guard` and
+:mod:`selfnav.ins.navigator`.
 """
 from __future__ import annotations
 
+import math
+from dataclasses import dataclass
+
+import numba
 import numpy as np
 
 from selfnav import attitude as att
@@ -49,39 +61,136 @@ from selfnav.types import Trajectory
 
 NX = 15
 IR, IV, IP, IBG, IBA = slice(0, 3), slice(3, 6), slice(6, 9), slice(9, 12), slice(12, 15)
-ISG, ISA = slice(15, 18), slice(18, 21)   # scale-factor errors (option)
+
+#: packed nominal state (the smoother's record): lat, lon, h, v(3), C_nb(9), b_g(3), b_a(3),
+#: s_g(3), s_a(3), μ(2), l(3), ε(1)
+PACK = dict(pos=slice(0, 3), vel=slice(3, 6), C=slice(6, 15), bg=slice(15, 18),
+            ba=slice(18, 21), sg=slice(21, 24), sa=slice(24, 27), mu=slice(27, 29),
+            lever=slice(29, 32), toff=slice(32, 33))
+PACK_SIZE = 33
+
+
+@dataclass(frozen=True)
+class StateLayout:
+    """Where each optional error-state block sits (``None``: not estimated)."""
+
+    nx: int
+    sg: slice | None = None
+    sa: slice | None = None
+    mu: slice | None = None
+    lever: slice | None = None
+    toff: slice | None = None
+
+    @classmethod
+    def of(cls, cfg: FilterConfig) -> "StateLayout":
+        n = NX
+        blocks = {}
+        for name, size, on in (("sg", 3, cfg.states.scale_factors),
+                               ("sa", 3, cfg.states.scale_factors),
+                               ("mu", 2, cfg.states.mount_states),
+                               ("lever", 3, cfg.states.lever_arm),
+                               ("toff", 1, cfg.states.time_offset)):
+            if on:
+                blocks[name] = slice(n, n + size)
+                n += size
+        return cls(n, **blocks)
+
+    def blocks(self):
+        """``(name, slice)`` of the optional blocks present."""
+        return [(k, getattr(self, k)) for k in ("sg", "sa", "mu", "lever", "toff")
+                if getattr(self, k) is not None]
+
+
+# ------------------------------------------------------------------------ compiled kernels
+@numba.njit(cache=True)
+def _propagate_cov(P, Phi, q, nsub, Phi_acc):  # pragma: no cover - compiled
+    """``nsub`` steps of ``P ← Φ P Φᵀ + diag(q)``; ``Φ_acc ← Φ^nsub Φ_acc``."""
+    for _ in range(nsub):
+        P[:, :] = Phi @ P @ Phi.T
+        for i in range(P.shape[0]):
+            P[i, i] += q[i]
+        Phi_acc[:, :] = Phi @ Phi_acc
+    # keep it symmetric against rounding
+    n = P.shape[0]
+    for i in range(n):
+        for j in range(i + 1, n):
+            s = 0.5 * (P[i, j] + P[j, i])
+            P[i, j] = s
+            P[j, i] = s
+
+
+@numba.njit(cache=True)
+def _joseph(P, H, R, r):  # pragma: no cover - compiled
+    """Kalman update in Joseph form, in place on ``P``; returns the error estimate ``dx``."""
+    PHt = P @ H.T
+    S = H @ PHt + R
+    K = np.linalg.solve(S, PHt.T).T
+    dx = K @ r
+    IKH = -K @ H
+    for i in range(IKH.shape[0]):
+        IKH[i, i] += 1.0
+    P[:, :] = IKH @ P @ IKH.T + K @ R @ K.T
+    return dx
+
+
+@numba.njit(cache=True)
+def _nis(P, H, R, r):  # pragma: no cover - compiled
+    """Normalised innovation squared ``rᵀ (H P Hᵀ + R)⁻¹ r``."""
+    S = H @ P @ H.T + R
+    return float(r @ np.linalg.solve(S, r))
+
+
+def nis(P, H, R, r) -> float:
+    """Normalised innovation squared of residual ``r`` (``H P Hᵀ + R``)."""
+    return float(_nis(P, np.ascontiguousarray(H), np.ascontiguousarray(R), np.asarray(r, float)))
 
 
 class InsGnssFilter:
     """Error-state EKF on top of a strapdown INS, with streaming ``predict``/``update_*`` calls.
 
-    Most users call :func:`run_filter`; this class is the streaming interface (feed IMU blocks
-    and fixes as they arrive).
+    Most users call :func:`selfnav.ins.run_filter`; this class is the streaming interface
+    (feed IMU blocks and measurements as they arrive).
+
+    Attributes
+    ----------
+    q_scale : float
+        ``λ``, the scale of the process noise (adapted by :mod:`selfnav.ins.calibrate`).
+    bg, ba, sg, sa, mu, lever_b, time_offset :
+        The estimated sensor errors, mounting angles, lever arm (body RFU, m) and residual
+        IMU time offset (s, added to the IMU stamps).
     """
 
     def __init__(self, cfg: FilterConfig, t0, lat, lon, h, velocity_n, C_nb, *, ellipsoid=WGS84):
         self.cfg = cfg
         self.ins = Strapdown(lat, lon, h, velocity_n, C_nb, t=t0, ellipsoid=ellipsoid,
                              vertical=cfg.vertical)
-        self.nx = 21 if cfg.states.scale_factors else NX
-        self.imt = slice(self.nx, self.nx + 2) if cfg.states.mount_states else None
-        self.nx += 2 if cfg.states.mount_states else 0
+        self.layout = lay = StateLayout.of(cfg)
+        self.nx = lay.nx
+        self.imt = lay.mu          # kept for callers that test for the mounting block
         self.bg = np.zeros(3)
         self.ba = np.zeros(3)
         self.sg = np.zeros(3)
         self.sa = np.zeros(3)
-        self.mu = np.array(cfg.states.mount_rad, dtype=float)   # IMU pitch, yaw relative to the vehicle
+        self.mu = np.array(cfg.states.mount_rad, dtype=float)
+        self.lever_b = np.array(cfg.gnss.lever_arm_b, dtype=float).reshape(3)
+        self.time_offset = 0.0
+        self.q_scale = 1.0
+        imu = cfg.imu
         P = np.zeros((self.nx, self.nx))
         P[IR, IR] = np.eye(3) * cfg.init.pos_sigma**2
         P[IV, IV] = np.eye(3) * cfg.init.vel_sigma**2
         P[IP, IP] = np.diag(np.square(cfg.init.att_sigma))
-        P[IBG, IBG] = np.eye(3) * cfg.imu.gyro_bias_sigma**2
-        P[IBA, IBA] = np.eye(3) * cfg.imu.accel_bias_sigma**2
-        if cfg.states.scale_factors:
-            P[ISG, ISG] = np.eye(3) * cfg.imu.gyro_sf_sigma**2
-            P[ISA, ISA] = np.eye(3) * cfg.imu.accel_sf_sigma**2
-        if cfg.states.mount_states:
-            P[self.imt, self.imt] = np.eye(2) * cfg.states.mount_sigma**2
+        P[IBG, IBG] = np.eye(3) * imu.gyro_bias_sigma**2
+        P[IBA, IBA] = np.eye(3) * imu.accel_bias_sigma**2
+        if lay.sg is not None:
+            P[lay.sg, lay.sg] = np.eye(3) * imu.gyro_sf_sigma**2
+            P[lay.sa, lay.sa] = np.eye(3) * imu.accel_sf_sigma**2
+        if lay.mu is not None:
+            P[lay.mu, lay.mu] = np.eye(2) * cfg.states.mount_sigma**2
+        if lay.lever is not None:
+            P[lay.lever, lay.lever] = np.eye(3) * cfg.states.lever_arm_sigma**2
+        if lay.toff is not None:
+            P[lay.toff, lay.toff] = cfg.states.time_offset_sigma**2
         self.P = P
         self._f_n = np.array([0.0, 0.0, 9.8])
         self._w_b = np.zeros(3)
@@ -90,43 +199,52 @@ class InsGnssFilter:
         self._n_corr = 0
         self._I = np.eye(self.nx)
         self._I3 = np.eye(3)
+        self._q0 = self._q_density()
 
     # ------------------------------------------------------------------ model
-    def _F(self, f_n, dt):
-        cfg = self.cfg
+    def _q_density(self):
+        """Diagonal process-noise density (per second) at ``λ = 1``."""
+        cfg, lay = self.cfg, self.layout
+        imu = cfg.imu
+        q = np.zeros(self.nx)
+        q[IV] = imu.vrw**2
+        q[IP] = imu.arw**2
+        q[IBG] = 2 * imu.gyro_bias_instability**2 / imu.instability_tau
+        q[IBA] = 2 * imu.accel_bias_instability**2 / imu.instability_tau
+        if lay.lever is not None:
+            q[lay.lever] = cfg.states.lever_arm_rw**2
+        if lay.toff is not None:
+            q[lay.toff] = cfg.states.time_offset_rw**2
+        if lay.mu is not None:
+            q[lay.mu] = cfg.states.mount_rw**2
+        return q
+
+    def _F(self):
+        cfg, lay = self.cfg, self.layout
         lat, h = self.ins.lat, self.ins.h
         v = self.ins.velocity_n
         rm, rn = radii(lat, h)
-        w_ie = np.array([0.0, OMEGA_EARTH * np.cos(lat), OMEGA_EARTH * np.sin(lat)])
-        w_en = np.array([-v[1] / rm, v[0] / rn, v[0] * np.tan(lat) / rn])
+        w_ie = np.array([0.0, OMEGA_EARTH * math.cos(lat), OMEGA_EARTH * math.sin(lat)])
+        w_en = np.array([-v[1] / rm, v[0] / rn, v[0] * math.tan(lat) / rn])
         C_bn = self.ins.C_nb.T
         F = np.zeros((self.nx, self.nx))
         F[0, 3] = F[1, 4] = F[2, 5] = 1.0
-        F[IV, IP] = skew3(f_n)
+        F[IV, IP] = skew3(self._f_n)
         F[IV, IV] = -skew3(2 * w_ie + w_en)
         F[IV, IBA] = -C_bn
         g = float(normal_gravity(lat, h))
-        F[5, 2] = 2.0 * g / (np.sqrt(rm * rn))
+        F[5, 2] = 2.0 * g / math.sqrt(rm * rn)
         F[IP, IP] = -skew3(w_ie + w_en)
         F[IP, IBG] = C_bn
         if np.isfinite(cfg.imu.gyro_bias_tau):
             F[IBG, IBG] = -self._I3 / cfg.imu.gyro_bias_tau
         if np.isfinite(cfg.imu.accel_bias_tau):
             F[IBA, IBA] = -self._I3 / cfg.imu.accel_bias_tau
-        if cfg.states.scale_factors:
+        if lay.sg is not None:
             # corrected rate (ω̃ − b)/(1 + s): its error is −(δb + diag(ω) δs)
-            F[IP, ISG] = C_bn * self._w_b[None, :]
-            F[IV, ISA] = -C_bn * self._f_b[None, :]
+            F[IP, lay.sg] = C_bn * self._w_b[None, :]
+            F[IV, lay.sa] = -C_bn * self._f_b[None, :]
         return F
-
-    def _Q(self, dt):
-        cfg = self.cfg
-        q = np.zeros(self.nx)
-        q[IV] = cfg.imu.vrw**2
-        q[IP] = cfg.imu.arw**2
-        q[IBG] = 2 * cfg.imu.gyro_bias_instability**2 / cfg.imu.instability_tau
-        q[IBA] = 2 * cfg.imu.accel_bias_instability**2 / cfg.imu.instability_tau
-        return np.diag(q * dt)
 
     # ------------------------------------------------------------------ propagation
     def predict(self, t, dtheta, dv):
@@ -146,76 +264,98 @@ class InsGnssFilter:
         self._f_b = f_b
         self._f_n = tr.C_nb[-1].T @ f_b
         self._w_b = dth.sum(0) / T
-        nsub = max(1, int(np.ceil(T / self.cfg.cov_step)))
-        F = self._F(self._f_n, T)
-        h = T / nsub
-        Phi = self._I + F * h + 0.5 * (F @ F) * h * h
-        Q = self._Q(h)
-        for _ in range(nsub):
-            self.P = Phi @ self.P @ Phi.T + Q
-            self._Phi_acc = Phi @ self._Phi_acc
+        self.propagate_covariance(T)
         return tr
+
+    def propagate_covariance(self, T):
+        """Covariance over ``T`` seconds at the current state (sub-steps of ``cov_step``)."""
+        nsub = max(1, int(math.ceil(T / self.cfg.cov_step)))
+        F = self._F()
+        h = T / nsub
+        Phi = self._I + F * h + 0.5 * (F @ F) * (h * h)
+        _propagate_cov(self.P, Phi, self._q0 * (self.q_scale * h), nsub, self._Phi_acc)
 
     # ------------------------------------------------------------------ updates
     def _correct(self, dx):
-        ins = self.ins
+        ins, lay = self.ins, self.layout
         lat, h = ins.lat, ins.h
         rm, rn = radii(lat, h)
         C_bn = rotvec_to_dcm3(dx[IP]) @ ins.C_nb.T
         self._n_corr += 1
         if self._n_corr % 100 == 0:  # rotations keep it orthonormal; clean rounding now and then
             C_bn = att.orthonormalize(C_bn)
-        ins.set_state(lat=lat - dx[1] / rm, lon=ins.lon - dx[0] / (rn * np.cos(lat)),
+        ins.set_state(lat=lat - dx[1] / rm, lon=ins.lon - dx[0] / (rn * math.cos(lat)),
                       h=h - dx[2], velocity_n=ins.velocity_n - dx[IV], C_nb=C_bn.T, check=False)
         self.bg -= dx[IBG]  # δb = estimated − true
         self.ba -= dx[IBA]
-        if self.cfg.states.scale_factors:
-            self.sg -= dx[ISG]
-            self.sa -= dx[ISA]
-        if self.imt is not None:
-            self.mu -= dx[self.imt]
+        if lay.sg is not None:
+            self.sg -= dx[lay.sg]
+            self.sa -= dx[lay.sa]
+        if lay.mu is not None:
+            self.mu -= dx[lay.mu]
+        if lay.lever is not None:
+            self.lever_b -= dx[lay.lever]
+        if lay.toff is not None:
+            self.time_offset -= float(dx[lay.toff][0])
 
-    def _kalman(self, r, H, R):
-        S = H @ self.P @ H.T + R
-        K = np.linalg.solve(S, H @ self.P).T
-        dx = K @ r
-        IKH = self._I - K @ H
-        self.P = IKH @ self.P @ IKH.T + K @ R @ K.T
+    def kalman(self, r, H, R):
+        """Apply a measurement (residual ``h(x̃) − z``, Jacobian ``H``, noise ``R``) and correct
+        the nominal state; returns the error estimate removed."""
+        dx = _joseph(self.P, np.ascontiguousarray(H, dtype=float),
+                     np.ascontiguousarray(R, dtype=float), np.asarray(r, dtype=float))
         self._correct(dx)
         return dx
 
+    def _gated(self, r, H, R, gate):
+        if nis(self.P, H, R, r) > gate:
+            return np.zeros(self.nx)
+        return self.kalman(r, H, R)
+
     def position_residual(self, lat, lon, h):
-        """``h(x̃) − z`` in ENU metres and its H for a GNSS fix at the antenna."""
-        ins = self.ins
+        """``h(x̃) − z`` in ENU metres and its H for a GNSS fix at the antenna (module
+        docstring: lever arm and time offset)."""
+        ins, lay = self.ins, self.layout
         C_bn = ins.C_nb.T
-        l_n = C_bn @ self.cfg.gnss.lever_arm_b
+        l_n = C_bn @ self.lever_b
         z = enu_offset(ins.lat, ins.lon, ins.h, lat, lon, h)
-        r = l_n - z
+        v = ins.velocity_n
+        r = l_n - v * self.time_offset - z
         H = np.zeros((3, self.nx))
-        H[:, IR] = np.eye(3)
+        H[0, 0] = H[1, 1] = H[2, 2] = 1.0
         H[:, IP] = skew3(l_n)
+        if lay.lever is not None:
+            H[:, lay.lever] = C_bn
+        if lay.toff is not None:
+            H[:, lay.toff.start] = -v
+        return r, H
+
+    def velocity_residual(self, velocity_n):
+        """``h(x̃) − z`` (ENU m/s) and H for a GNSS velocity at the antenna."""
+        ins, lay = self.ins, self.layout
+        C_bn = ins.C_nb.T
+        v_lever = C_bn @ np.cross(self._w_b, self.lever_b)
+        r = ins.velocity_n + v_lever - np.asarray(velocity_n, dtype=float)
+        H = np.zeros((3, self.nx))
+        H[0, 3] = H[1, 4] = H[2, 5] = 1.0
+        H[:, IP] = skew3(v_lever)
+        if lay.lever is not None:
+            H[:, lay.lever] = C_bn @ skew3(self._w_b)
         return r, H
 
     def update_position(self, lat, lon, h, sigma_h, sigma_v, *, gate=None):
         """GNSS position update with χ² gating; returns ``(accepted, nis, residual)``."""
         r, H = self.position_residual(lat, lon, h)
         R = np.diag([sigma_h**2, sigma_h**2, sigma_v**2])
-        S = H @ self.P @ H.T + R
-        nis = float(r @ np.linalg.solve(S, r))
-        if gate is not None and nis > gate:
-            return False, nis, r
-        self._kalman(r, H, R)
-        return True, nis, r
+        q = nis(self.P, H, R, r)
+        if gate is not None and q > gate:
+            return False, q, r
+        self.kalman(r, H, R)
+        return True, q, r
 
-    def update_velocity(self, velocity_n, sigma):
-        H = np.zeros((3, self.nx))
-        H[:, IV] = np.eye(3)
-        r = self.ins.velocity_n - np.asarray(velocity_n)
-        R = np.eye(3) * sigma**2
-        S = H @ self.P @ H.T + R
-        if float(r @ np.linalg.solve(S, r)) > CHI2_3_999:
-            return np.zeros(self.nx)
-        return self._kalman(r, H, R)
+    def update_velocity(self, velocity_n, sigma, gate=CHI2_3_999):
+        """GNSS velocity update (χ² gated); returns the correction (zeros if gated out)."""
+        r, H = self.velocity_residual(velocity_n)
+        return self._gated(r, H, np.eye(3) * sigma**2, gate)
 
     def update_nhc(self):
         """Non-holonomic constraint: the vehicle's lateral and vertical velocity are zero.
@@ -230,22 +370,23 @@ class InsGnssFilter:
         v = self.ins.velocity_n
         vv = C_nb @ v
         C_vn = C_nb
-        lever = self.cfg.vehicle.nhc_lever_b
+        veh = self.cfg.vehicle
+        lever = veh.nhc_lever_b
         if lever[0] or lever[1] or lever[2]:
-            vv = vv + skew3(self._w_b) @ lever
-        if self.imt is not None or self.mu[0] or self.mu[1]:
+            vv = vv + np.cross(self._w_b, lever)
+        mu_on = self.layout.mu is not None
+        if mu_on or self.mu[0] or self.mu[1]:
             C_vb = rotvec_to_dcm3(np.array([self.mu[0], 0.0, self.mu[1]]))
             C_vn = C_vb @ C_nb
             vv = C_vb @ vv
         H = np.zeros((2, self.nx))
         H[:, IV] = C_vn[[0, 2]]
         H[:, IP] = -C_vn[[0, 2]] @ skew3(v)
-        if self.imt is not None:
-            H[:, self.imt] = -skew3(vv)[[0, 2]][:, [0, 2]]
-        cfg = self.cfg
-        s_up = cfg.vehicle.nhc_sigma if cfg.vehicle.nhc_sigma_up is None else cfg.vehicle.nhc_sigma_up
-        R = np.diag([cfg.vehicle.nhc_sigma**2, s_up**2])
-        return self._kalman(vv[[0, 2]], H, R)
+        if mu_on:
+            H[:, self.layout.mu] = -skew3(vv)[[0, 2]][:, [0, 2]]
+        s_up = veh.nhc_sigma if veh.nhc_sigma_up is None else veh.nhc_sigma_up
+        R = np.diag([veh.nhc_sigma**2, s_up**2])
+        return self.kalman(vv[[0, 2]], H, R)
 
     def update_road(self, normal_n, offset, sigma, heading=None, sigma_heading=None):
         """Road constraint: the vehicle is on the road centre line (and heads along it).
@@ -275,18 +416,13 @@ class InsGnssFilter:
             rows.append(h2)
             res.append(float(np.angle(np.exp(1j * (hdg - heading)))))
             var.append(sigma_heading**2)
-        H = np.array(rows)
-        r = np.array(res)
-        R = np.diag(var)
-        S = H @ self.P @ H.T + R
-        if float(r @ np.linalg.solve(S, r)) > (CHI2_2_999 if len(r) == 2 else CHI2_1_999):
-            return np.zeros(self.nx)
-        return self._kalman(r, H, R)
+        return self._gated(np.array(res), np.array(rows), np.diag(var),
+                           CHI2_2_999 if len(res) == 2 else CHI2_1_999)
 
     def update_zupt(self):
         H = np.zeros((3, self.nx))
-        H[:, IV] = np.eye(3)
-        return self._kalman(self.ins.velocity_n, H, np.eye(3) * self.cfg.vehicle.zupt_sigma**2)
+        H[0, 3] = H[1, 4] = H[2, 5] = 1.0
+        return self.kalman(self.ins.velocity_n, H, np.eye(3) * self.cfg.vehicle.zupt_sigma**2)
 
     def update_heading(self, heading, sigma):
         """True heading (rad), e.g. magnetic heading plus declination (seed 004 (12))."""
@@ -294,10 +430,11 @@ class InsGnssFilter:
         r = np.array([np.angle(np.exp(1j * (hdg - heading)))])
         H = np.zeros((1, self.nx))
         H[0, 8] = 1.0  # ψ_U raises the computed heading (C̃ = (I − [ψ]) C)
-        S = H @ self.P @ H.T + sigma**2
-        if float(r @ r / S[0, 0]) > CHI2_1_999:
-            return np.zeros(self.nx)
-        return self._kalman(r, H, np.array([[sigma**2]]))
+        return self._gated(r, H, np.array([[sigma**2]]), CHI2_1_999)
+
+    def lever_arm_n(self):
+        """The antenna lever arm in ENU, m."""
+        return self.ins.C_nb.T @ self.lever_b
 
     def take_transition(self):
         Phi = self._Phi_acc
@@ -305,53 +442,43 @@ class InsGnssFilter:
         return Phi
 
 
-def _lever_arm_n(self):
-    return self.ins.C_nb.T @ self.cfg.gnss.lever_arm_b
-
-
-InsGnssFilter.lever_arm_n = _lever_arm_n
-
-
-def pack_state(flt):
+# ------------------------------------------------------------------------ smoother
+def pack_state(flt) -> np.ndarray:
+    """The nominal state and sensor estimates of a filter as one row (:data:`PACK`)."""
     s = flt.ins
     return np.concatenate([[s.lat, s.lon, s.h], s.velocity_n, s.C_nb.reshape(9), flt.bg, flt.ba,
-                           flt.sg, flt.sa, flt.mu])
+                           flt.sg, flt.sa, flt.mu, flt.lever_b, [flt.time_offset]])
 
 
 def unpack_states(t, states, Ps):
-    C = states[:, 6:15].reshape(-1, 3, 3)
-    traj = Trajectory(t, states[:, 0], states[:, 1], states[:, 2], states[:, 3:6], C,
+    """Trajectory and per-epoch σ of the error states from packed rows."""
+    C = states[:, PACK["C"]].reshape(-1, 3, 3)
+    traj = Trajectory(t, states[:, 0], states[:, 1], states[:, 2], states[:, PACK["vel"]], C,
                       source="selfnav ekf")
     sig = np.sqrt(np.maximum(np.diagonal(Ps, axis1=1, axis2=2), 0.0))
-    return traj, sig, states[:, 15:18], states[:, 18:21], states[:, 27:29]
+    return traj, sig
 
 
-def apply_error(state, dx):
-    """Remove an error-state estimate from a packed nominal state.
-
-    The layout is told by the length of ``dx``: 15 (+6 scale factors) (+2 mounting angles).
-    """
+def apply_error(state, dx, layout: StateLayout):
+    """Remove an error-state estimate ``dx`` from a packed nominal state."""
     lat, lon, h = state[0], state[1], state[2]
     rm, rn = radii(lat, h)
     out = state.copy()
     out[0] = lat - dx[1] / rm
     out[1] = lon - dx[0] / (rn * np.cos(lat))
     out[2] = h - dx[2]
-    out[3:6] = state[3:6] - dx[IV]
-    C_nb = state[6:15].reshape(3, 3)
+    out[PACK["vel"]] = state[PACK["vel"]] - dx[IV]
+    C_nb = state[PACK["C"]].reshape(3, 3)
     C_bn = att.rotvec_to_dcm(dx[IP]) @ C_nb.T
-    out[6:15] = att.orthonormalize(C_bn).T.reshape(9)
-    out[15:18] = state[15:18] - dx[IBG]
-    out[18:21] = state[18:21] - dx[IBA]
-    if len(dx) >= 21:
-        out[21:24] = state[21:24] - dx[ISG]
-        out[24:27] = state[24:27] - dx[ISA]
-    if len(dx) in (NX + 2, 23):
-        out[27:29] = state[27:29] - dx[-2:]
+    out[PACK["C"]] = att.orthonormalize(C_bn).T.reshape(9)
+    out[PACK["bg"]] = state[PACK["bg"]] - dx[IBG]
+    out[PACK["ba"]] = state[PACK["ba"]] - dx[IBA]
+    for name, sl in layout.blocks():
+        out[PACK[name]] = state[PACK[name]] - dx[sl]
     return out
 
 
-def rts_smooth(states, P_plus, P_minus, Phi, updates, breaks=None):
+def rts_smooth(states, P_plus, P_minus, Phi, updates, layout: StateLayout, breaks=None):
     """Rauch–Tung–Striebel smoother in error-state form over the stored epochs.
 
     Epoch k holds the corrected nominal state x̃⁺_k with covariance P⁺_k; ``Phi[k]`` carries the
@@ -377,9 +504,10 @@ def rts_smooth(states, P_plus, P_minus, Phi, updates, breaks=None):
         A = np.linalg.solve(Pm.T, (P_plus[k] @ Phi[k + 1].T).T).T
         eps = A @ (updates[k + 1] + eps_next)
         Ps[k] = P_plus[k] + A @ (Ps[k + 1] - Pm) @ A.T
-        out[k] = apply_error(states[k], eps)
+        out[k] = apply_error(states[k], eps, layout)
         eps_next = eps
     return out, Ps
 
 
-__all__ = ["InsGnssFilter", "NX", "IR", "IV", "IP", "IBG", "IBA"]
+__all__ = ["InsGnssFilter", "StateLayout", "NX", "IR", "IV", "IP", "IBG", "IBA", "PACK",
+           "pack_state", "unpack_states", "apply_error", "rts_smooth", "nis"]

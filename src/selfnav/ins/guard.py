@@ -34,7 +34,12 @@ import dataclasses
 import numpy as np
 
 from selfnav.earth import enu_offset
-from selfnav.ins.config import CHI2_2_9999, chi2_999
+from selfnav.ins.config import CHI2_2_999, CHI2_2_9999, chi2_999
+
+#: χ² (2 dof) of a fix-to-fix link
+CHI2_2_999_LINK = CHI2_2_999
+#: median absolute deviation to σ for a normal distribution
+MAD_TO_SIGMA = 1.4826
 from selfnav.ins.ekf import IR, IV
 
 
@@ -122,13 +127,13 @@ class DeadReckoningGuard:
             sh.take_transition()
 
     # ------------------------------------------------------------------ tests
-    def _mature(self, t):
+    def mature(self, t):
         """The ``[t_branch, filter]`` entries old enough to test, oldest first."""
         return [e for e in self.shadows if t - e[0] >= self.cfg.shadows.min_age]
 
     def shadows_mature(self, t):
         """The number of shadows old enough to test fixes."""
-        return len(self._mature(t))
+        return len(self.mature(t))
 
     def rejects(self, t, lat, lon, h, sigma_h, scale=1.0):
         """The oldest mature shadow (its entry) that rejects the fix (horizontal χ²), or None.
@@ -137,7 +142,7 @@ class DeadReckoningGuard:
         covariance is optimistic after the alignment, and a false alarm costs a reset).
         """
         self._flush()
-        for e in self._mature(t):
+        for e in self.mature(t):
             r, H = e[1].position_residual(lat, lon, h)
             S = (H @ e[1].P @ H.T)[:2, :2] * scale**2 + np.eye(2) * sigma_h**2
             if float(r[:2] @ np.linalg.solve(S, r[:2])) > self.cfg.shadows.shadow_gate:
@@ -150,7 +155,7 @@ class DeadReckoningGuard:
         σ), or None. The velocity is the sharper test: a drift followed for a few seconds
         bends the velocity by its rate (σ 3 m/s at 200 m, 60 s) against a shadow's 0.1–1 m/s."""
         self._flush()
-        for e in self._mature(t):
+        for e in self.mature(t):
             sh = e[1]
             d, dv = _difference(sh, flt)
             for r, idx in ((d[:2], slice(0, 2)), (dv[:2], slice(3, 5))):
@@ -167,7 +172,7 @@ class DeadReckoningGuard:
         filter then carries into the dead reckoning is off by up to the drift's rate, which its
         covariance does not know — and an optimistic covariance never re-acquires."""
         self._flush()
-        mature = self._mature(t)
+        mature = self.mature(t)
         if not mature:
             return None
         d, dv = _difference(mature[-1][1], flt)
@@ -223,32 +228,129 @@ def track_agrees(t, innov_xy, sig, P_vv, max_fit_sigma=0.5, gate=CHI2_2_9999):
     return float(coef[1] @ np.linalg.solve(S, coef[1])) <= gate
 
 
-__all__ = ["DeadReckoningGuard", "clone_filter", "track_agrees", "IR", "IV"]
+class FixChain:
+    """Do the fixes agree with each other through their own velocity? (GNSS only, no INS)
+
+    "Decide who is wrong before acting" (DESIGN §10): a fix is *linked* to the previous one
+    when the displacement between them matches the GNSS velocity integrated over the interval
+    (trapezoid), both between consecutive fixes and over a window of ``window_s`` (which
+    catches a slow drift the single step hides), at χ² 0.999. A fix is *anchored* when it is
+    linked to a fix that was used or itself anchored: a chain of such fixes is evidence
+    against an INS that rejects them, not against the fixes. A jump, white noise or a drift
+    breaks the chain; a fix without velocity (or too imprecise for the test to mean anything)
+    is never anchored. Horizontal only.
+
+    Parameters
+    ----------
+    window_s : the long link, s
+    max_gap_s : a longer gap between fixes breaks the chain, s
+    jerk : the trapezoid rule's error bound for the vehicle's changing acceleration, m/s³
+    vel_bias : a slowly varying velocity error the long link allows for, m/s
+    max_sigma : fixes less precise than this (m) are not tested
+    """
+
+    def __init__(self, window_s=5.0, max_gap_s=2.0, jerk=2.0, vel_bias=0.02, max_sigma=0.5,
+                 gate=CHI2_2_999_LINK):
+        self.window_s, self.max_gap_s, self.jerk, self.max_sigma = window_s, max_gap_s, jerk, max_sigma
+        self.vel_bias = vel_bias
+        self.gate = gate
+        self.hist = []          # (t, p_EN (2,), v_EN (2,), σ_p, σ_v, anchored)
+        self.breaks = 0
+
+    def _test(self, a, b, span):
+        dt = b[0] - a[0]
+        # the velocity integral over the fixes in between (trapezoid), and its error
+        pred = np.zeros(2)
+        var_v = 0.0
+        for x, y in zip(span[:-1], span[1:]):
+            h = y[0] - x[0]
+            pred += 0.5 * (x[2] + y[2]) * h
+            var_v += 0.5 * (x[4] ** 2 + y[4] ** 2) * h * h + (self.jerk * h**3 / 12.0) ** 2
+        d = b[1] - a[1] - pred
+        var = a[3] ** 2 + b[3] ** 2 + var_v + (self.vel_bias * dt) ** 2
+        return float(d @ d) / var <= self.gate and dt > 0
+
+    def add(self, t, p_en, v_en, sigma_p, sigma_v, used_prev: bool):
+        """Add a fix; returns ``(linked, anchored)``. ``used_prev``: the previous fix was used."""
+        if self.hist:
+            last = self.hist[-1]
+            self.hist[-1] = last[:5] + (last[5] or used_prev,)
+        ok = (v_en is not None and np.all(np.isfinite(v_en)) and sigma_p <= self.max_sigma)
+        rec = (float(t), np.asarray(p_en, float)[:2], None if v_en is None else np.asarray(v_en, float)[:2],
+               float(sigma_p), float(sigma_v), False)
+        linked = False
+        if ok and self.hist and self.hist[-1][2] is not None and t - self.hist[-1][0] <= self.max_gap_s:
+            prev = self.hist[-1]
+            linked = self._test(prev, rec, [prev, rec])
+            if linked:
+                j = next((i for i in range(len(self.hist) - 1, -1, -1)
+                          if t - self.hist[i][0] >= self.window_s), None)
+                if j is not None:
+                    span = self.hist[j:] + [rec]
+                    gaps = all(y[0] - x[0] <= self.max_gap_s and x[2] is not None
+                               for x, y in zip(span[:-1], span[1:]))
+                    linked = gaps and self._test(self.hist[j], rec, span)
+        anchored = linked and self.hist[-1][5]
+        if not linked and self.hist:
+            self.breaks += 1
+        self.hist.append(rec[:5] + (anchored,))
+        while self.hist and t - self.hist[0][0] > 2 * self.window_s + self.max_gap_s:
+            self.hist.pop(0)
+        return linked, anchored
 
 
-def white_scale(sus, cfg):
+def kinematic_consistent(t, p, sigma, max_accel=2.0, min_span=8.0):
+    """Do fixes fit one smooth track by themselves? (GNSS only, no INS, no velocity)
+
+    A quadratic in time (position, velocity, a constant acceleration) is fitted to the
+    horizontal positions ``p`` (W, 2) at times ``t`` with σ ``sigma`` (W,); the track is
+    consistent when the fit's χ² is within χ²(2(W−3), 0.999), the acceleration within
+    ``max_accel`` plus its 3σ, and the run spans ``min_span`` s. White or rough
+    outliers fail; clean fixes and a smooth drift pass (what separates those is the INS).
+    """
+    t = np.asarray(t, float)
+    W = len(t)
+    if W < 6 or t[-1] - t[0] < min_span:
+        return False
+    tt = t - t.mean()
+    A = np.column_stack([np.ones(W), tt, 0.5 * tt * tt])
+    w = 1.0 / np.asarray(sigma, float)
+    coef, *_ = np.linalg.lstsq(A * w[:, None], np.asarray(p, float) * w[:, None], rcond=None)
+    res = (np.asarray(p, float) - A @ coef) * w[:, None]
+    if float(np.sum(res * res)) > chi2_999(2 * (W - 3)):
+        return False
+    cov = np.linalg.inv((A * w[:, None]).T @ (A * w[:, None]))
+    return bool(np.hypot(*coef[2]) <= max_accel + 3.0 * np.sqrt(2.0 * cov[2, 2]))
+
+
+__all__ = ["DeadReckoningGuard", "FixChain", "kinematic_consistent", "clone_filter", "track_agrees", "white_scale",
+           "window_consistent"]
+
+
+def white_scale(sus, out):
     """Robust per-axis scale of suspect innovations if they look white, else None.
 
-    Innovations (fix minus INS) over the last ``degraded_window`` seconds, each axis detrended
+    ``out`` is the :class:`~selfnav.ins.config.OutlierDefence` configuration. Innovations (fix
+    minus INS) over the last ``degraded_window`` seconds, each axis detrended
     by a straight line (the dead-reckoning drift is slow). White errors: lag-1 autocorrelation
     near zero and the scale from fix-to-fix differences (÷√2) equal to the scale about the
     line. A drifting (Gauss–Markov) error is strongly autocorrelated: its fixes are not used.
     """
-    if len(sus) < cfg.outliers.degraded_min:
+    if len(sus) < out.degraded_min:
         return None
     t = np.array([x[0] for x in sus])
     v = np.array([x[1][:2] for x in sus])
     A = np.column_stack([np.ones(len(t)), t - t.mean()])
     res = v - A @ np.linalg.lstsq(A, v, rcond=None)[0]
     rho = np.sum(res[1:] * res[:-1], axis=0) / np.maximum(np.sum(res * res, axis=0), 1e-300)
-    s_diff = 1.4826 * np.median(np.abs(np.diff(res, axis=0))) / np.sqrt(2.0)
-    s_level = 1.4826 * np.median(np.abs(res - np.median(res, axis=0)))
-    if s_level <= 0 or np.max(rho) > 0.3 or s_diff < 0.8 * s_level:
+    s_diff = MAD_TO_SIGMA * np.median(np.abs(np.diff(res, axis=0))) / np.sqrt(2.0)
+    s_level = MAD_TO_SIGMA * np.median(np.abs(res - np.median(res, axis=0)))
+    if s_level <= 0 or np.max(rho) > out.white_rho_max or s_diff < out.white_ratio_min * s_level:
         return None
     return float(max(s_diff, s_level))
 
 
-def window_consistent(buf, gnss, sig_h, sig_v, sv, trend=False):
+def window_consistent(buf, fixes, sv, trend=False):
     """The fixes of the window share one offset from the INS displacement (χ², 0.999).
 
     ``d_i = z_i − (INS displacement)_i`` is the same for every fix of a healthy window (the INS
@@ -257,21 +359,26 @@ def window_consistent(buf, gnss, sig_h, sig_v, sv, trend=False):
     outliers), and P cannot weaken it. ``trend=True`` fits an offset *and a rate* (the
     velocity error of a long dead reckoning, which its covariance may understate; the rate is
     then judged by :func:`selfnav.ins.guard.track_agrees`): ``χ²(3(W−2))``.
+
+    ``buf`` holds ``(fix index, INS displacement at the fix)``; ``fixes[k]`` has ``t, lat,
+    lon, h, sigma_h, sigma_v``.
     """
     if len(buf) < 2:
         return True
     k0, s0 = buf[0]
+    f0 = fixes[k0]
     d, var = [], []
-    tm = np.mean([gnss.t[k] for k, _ in buf])
+    tm = np.mean([fixes[k].t for k, _ in buf])
     for k, snap in buf:
-        z = enu_offset(gnss.lat[k0], gnss.lon[k0], gnss.h[k0], gnss.lat[k], gnss.lon[k], gnss.h[k])
+        f = fixes[k]
+        z = enu_offset(f0.lat, f0.lon, f0.h, f.lat, f.lon, f.h)
         d.append(z - (snap - s0))
-        drift2 = (sv * (gnss.t[k] - tm)) ** 2
-        var.append([sig_h[k] ** 2 + drift2, sig_h[k] ** 2 + drift2, sig_v[k] ** 2 + drift2])
+        drift2 = (sv * (f.t - tm)) ** 2
+        var.append([f.sigma_h ** 2 + drift2, f.sigma_h ** 2 + drift2, f.sigma_v ** 2 + drift2])
     d, var = np.array(d), np.array(var)
     w = 1.0 / var
     if trend and len(buf) > 2:
-        t = np.array([gnss.t[k] for k, _ in buf]) - tm
+        t = np.array([fixes[k].t for k, _ in buf]) - tm
         A = np.column_stack([np.ones(len(t)), t])
         res = np.empty_like(d)
         for j in range(3):

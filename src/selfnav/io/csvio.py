@@ -216,13 +216,21 @@ def write_csv(path, columns: dict, *, comments=(), fmt="%.10g"):
     n = {len(a) for a in arrs}
     if len(n) > 1:
         raise ValueError(f"columns of different lengths: {dict(zip(names, map(len, arrs)))}")
-    fmts = [fmt.get(k, "%.10g") if isinstance(fmt, dict) else fmt for k in names]
+    text = [a.dtype.kind in "OUS" for a in arrs]
+    fmts = ["%s" if txt else (fmt.get(k, "%.10g") if isinstance(fmt, dict) else fmt)
+            for k, txt in zip(names, text)]
     with atomic_path(path) as tmp, open(tmp, "w", newline="\n") as fh:
         for c in comments:
             fh.write(f"# {c}\n")
         fh.write(",".join(names) + "\n")
         if arrs and len(arrs[0]):
-            np.savetxt(fh, np.column_stack(arrs), delimiter=",", fmt=fmts)
+            if any(text):   # text columns (a status word): an object table keeps each type
+                table = np.empty((len(arrs[0]), len(arrs)), dtype=object)
+                for j, a in enumerate(arrs):
+                    table[:, j] = a
+            else:
+                table = np.column_stack(arrs)
+            np.savetxt(fh, table, delimiter=",", fmt=fmts)
     return path
 
 

@@ -61,7 +61,8 @@ def read_rtklib_pos(path) -> GnssData:
     """RTKLIB solution file (``.pos``, lat/lon/height format, GPST), time as GPS seconds of week.
 
     Columns: date, time, lat, lon, h, Q, ns, sdn, sde, sdu, sdne, sdeu, sdun, age, ratio and,
-    when present, vn, ve, vu (m/s). Returns WGS-84 positions, σ = max(sdn, sde), ENU velocity.
+    when present, vn, ve, vu (m/s) and their σ sdvn, sdve, sdvu, ... Returns WGS-84 positions,
+    σ = max(sdn, sde), vertical σ sdu, ENU velocity and its σ max(sdvn, sdve), the Q flag.
     """
     path = Path(path)
     text = open_text(path)
@@ -82,14 +83,14 @@ def read_rtklib_pos(path) -> GnssData:
         sec = calendar.timegm(d.timetuple())
         frac = d.microsecond * 1e-6
         try:
-            vals = [float(x) for x in parts[2:21]]
+            vals = [float(x) for x in parts[2:27]]
         except ValueError:
             raise InputError(path, "non-numeric value", row=i + 1) from None
         rows.append([float((sec - GPS_EPOCH_UNIX) % int(WEEK)) + frac] + vals)
         lines.append(i + 1)
     if not rows:
         raise InputError(path, "has no solution rows")
-    a = np.array([r + [np.nan] * (20 - len(r)) for r in rows])
+    a = np.array([r + [np.nan] * (26 - len(r)) for r in rows])
     t = a[:, 0]
     if np.any(np.diff(t) <= 0):
         k = int(np.argmax(np.diff(t) <= 0)) + 1
@@ -98,8 +99,12 @@ def read_rtklib_pos(path) -> GnssData:
     if np.all(np.isfinite(a[:, 14:17])):
         vel = np.column_stack([a[:, 15], a[:, 14], a[:, 16]])  # ve, vn, vu
     sig = np.maximum(a[:, 6], a[:, 7])  # sdn, sde
+    sig_vel = None
+    if vel is not None and np.all(np.isfinite(a[:, 17:19])) and np.all(a[:, 17:19] > 0):
+        sig_vel = np.maximum(a[:, 17], a[:, 18])  # sdvn, sdve
+    sig_v = a[:, 8] if np.all(a[:, 8] > 0) else None
     return GnssData(t, np.radians(a[:, 1]), np.radians(a[:, 2]), a[:, 3], sig, vel,
-                    a[:, 4].astype(int), str(path))
+                    a[:, 4].astype(int), str(path), sig_v, sig_vel)
 
 
 def _nmea_deg(v, hemi):

@@ -16,22 +16,27 @@ from selfnav.io.imu import read_imu_csv
 from selfnav.io.kfgins import read_kfgins_imu
 from selfnav.io.nmea_rmc import read_nmea_rmc
 from selfnav.io.psins import read_psins_imu
+from selfnav.io.psins_mat import (AVP_COLUMNS, INCREMENT_COLUMNS, header_of, read_avp_csv,
+                                  read_increments_csv)
 from selfnav.io.rtklibexplorer import IMU_T_OFF, read_rtklibexplorer_imu
 from selfnav.types import GnssData, ImuData
 
-IMU_FORMATS = ("auto", "csv", "psins", "rtklibexplorer", "kfgins")
-GNSS_FORMATS = ("auto", "csv", "pos", "nmea")
+IMU_FORMATS = ("auto", "csv", "psins", "psins-csv", "rtklibexplorer", "kfgins")
+GNSS_FORMATS = ("auto", "csv", "pos", "nmea", "psins-avp")
 
 
 def imu_format_of(path) -> str:
     """The IMU format ``auto`` picks: PSINS for ``.imu``/``.imu.gz``, rtklibexplorer when a
-    ``.tag`` file stands beside the CSV, the native CSV otherwise."""
+    ``.tag`` file stands beside the CSV, PSINS increments for a CSV headed ``dtheta_x_rad,...``,
+    the native CSV otherwise."""
     p = Path(path)
     name = p.name.lower()
     if name.endswith((".imu", ".imu.gz")):
         return "psins"
     if p.with_name(p.name + ".tag").exists():
         return "rtklibexplorer"
+    if header_of(p)[:1] == (INCREMENT_COLUMNS[0],):
+        return "psins-csv"
     return "csv"
 
 
@@ -59,6 +64,8 @@ def read_imu(path, fmt: str = "auto", *, time_offset_s: float = 0.0) -> ImuData:
         imu = read_psins_imu(p)
     elif fmt == "kfgins":
         imu = read_kfgins_imu(p)
+    elif fmt == "psins-csv":
+        imu = read_increments_csv(p)
     elif fmt == "rtklibexplorer":
         imu = read_rtklibexplorer_imu(p, t_offset=IMU_T_OFF + time_offset_s)
         imu.meta["time_offset_s"] = IMU_T_OFF + time_offset_s
@@ -89,9 +96,13 @@ def read_imu_positions(paths, fmt: str = "auto") -> ImuData:
 
 def gnss_format_of(path) -> str:
     """The GNSS format ``auto`` picks from the extension: ``.pos`` RTKLIB, ``.nmea``/``.nma``/
-    ``.gga`` NMEA, anything else the native CSV."""
+    ``.gga`` NMEA, a CSV headed ``pitch_rad,...`` a PSINS navigation output, anything else the
+    native CSV."""
     ext = Path(path).suffix.lower()
-    return {".pos": "pos", ".nmea": "nmea", ".nma": "nmea", ".gga": "nmea"}.get(ext, "csv")
+    fmt = {".pos": "pos", ".nmea": "nmea", ".nma": "nmea", ".gga": "nmea"}.get(ext, "csv")
+    if fmt == "csv" and header_of(path)[:1] == (AVP_COLUMNS[0],):
+        return "psins-avp"
+    return fmt
 
 
 def _with_rmc_velocity(g: GnssData, path) -> GnssData:
@@ -125,6 +136,10 @@ def read_gnss(path, fmt: str = "auto", datum: str = "wgs84") -> GnssData:
         g = read_rtklib_pos(p)
     elif fmt == "nmea":
         g = _with_rmc_velocity(read_nmea(p), p)
+    elif fmt == "psins-avp":
+        # another navigator's output (PSINS avp) as position and velocity fixes, σ not given
+        tr = read_avp_csv(p)
+        g = GnssData(tr.t, tr.lat, tr.lon, tr.h, None, tr.velocity_n, None, str(p))
     else:
         raise InputError(p, f"unknown GNSS format '{fmt}' (use {', '.join(GNSS_FORMATS)})")
     if datum.lower() != "wgs84":

@@ -7,6 +7,8 @@ import numpy as np
 from selfnav import attitude as att
 from selfnav.errors import InputError
 from selfnav.io.csvio import check_time, read_table, write_csv
+from selfnav.io.gnss import read_rtklib_pos
+from selfnav.io.psins_mat import AVP_COLUMNS, header_of, read_avp_csv
 from selfnav.types import Trajectory
 
 TRUTH_COLUMNS = ("t", "lat_deg", "lon_deg", "h_m", "ve", "vn", "vu", "roll_deg", "pitch_deg",
@@ -29,7 +31,17 @@ def write_truth(path, traj: Trajectory, comments=()):
 
 
 def read_truth(path) -> Trajectory:
-    """Read a truth or solution CSV; velocity and attitude default to NaN when absent."""
+    """Read a truth or solution CSV; velocity and attitude default to NaN when absent.
+
+    An RTKLIB solution (``.pos``) is read as a truth too (positions and velocity, no attitude):
+    the usual reference of a drive with RTK; so is a PSINS navigation output (``avp`` CSV)."""
+    if header_of(path)[:1] == (AVP_COLUMNS[0],):
+        return read_avp_csv(path)
+    if str(path).lower().endswith(".pos"):
+        g = read_rtklib_pos(path)
+        n = len(g.t)
+        v = g.velocity_n if g.velocity_n is not None else np.full((n, 3), np.nan)
+        return Trajectory(g.t, g.lat, g.lon, g.h, v, np.full((n, 3, 3), np.nan), source=str(path))
     tab = read_table(path, ("t", "lat_deg", "lon_deg"), optional=TRUTH_COLUMNS[3:])
     t = check_time(tab, min_rows=1)
     lat = np.radians(tab["lat_deg"])

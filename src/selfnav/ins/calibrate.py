@@ -1,0 +1,392 @@
+"""Noise and timing from the data: the navigator calibrates itself (DESIGN §10, issue 10).
+
+An outlier defence is only as good as the covariance it trusts, and a preset is a guess. Three
+measurements replace the guess before and during the run:
+
+1. **IMU noise at rest** (:func:`measure_noise`): on the still segments (the IMU quiet *and*,
+   where GNSS says so, the vehicle stopped), the white noise of each sensor is the Allan
+   deviation in its white-noise region, taken conservatively as ``max σ_A(τ)·√τ`` over
+   ``τ`` = 0.3…3 s — engine vibration and a rocking car count as noise, which they are for a
+   filter; the gyro bias is the still mean (less the Earth rate it contains, unknown in
+   direction: its size goes into the bias σ); the accelerometers' error shows as
+   ``| |f| − g |``.
+2. **IMU–GNSS time offset** (:func:`estimate_time_offset`): the gyro heading (yaw rate about
+   the mean specific-force direction, integrated) against the GNSS course, over every
+   stretch faster than 3 m/s, with a constant per stretch and one heading drift (the gyro
+   bias); the offset minimises the misfit (5 ms grid, parabolic refinement). Turns carry the
+   information: a drive without turns returns no estimate.
+3. **Process-noise scale online** (:class:`NoiseAdapter`): ``λ`` multiplies the filter's
+   process noise. It is driven only by *trusted* fixes (accepted in normal mode, or
+   anchored to accepted ones by a velocity-checked chain, :class:`selfnav.ins.guard.FixChain`):
+   by the main filter's normalised innovations (upward, when the INS is more uncertain than
+   it says) and by the shadows' dead-reckoning errors over 5–90 s (both ways: the horizon
+   where the process noise, not the fix noise, decides). Each update is bounded, and an
+   outlier that is not trusted never enters — outliers cannot pump ``λ`` up.
+
+A preset is a prior: where the data is noisier than it says, the measured values win and
+:func:`calibrated_config` returns one warning line saying so.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from selfnav import sensors
+from selfnav.allan import allan_deviation
+from selfnav.earth import OMEGA_EARTH, enu_offset, normal_gravity
+from selfnav.ins.config import FilterConfig, ImuNoise
+from selfnav.types import GnssData, ImuData
+from selfnav.units import DEG
+
+#: a still segment needs this many seconds of quiet IMU (and, with GNSS, a stopped vehicle)
+STILL_MIN_S = 5.0
+#: GNSS speed below which the vehicle is stopped, m/s
+STILL_SPEED = 0.3
+#: Allan cluster times of the white-noise measurement, s
+WHITE_TAU = (0.3, 3.0)
+#: the measured noise wins over the prior when it is this many times larger (and is reported)
+NOISIER_THAN_PRIOR = 2.0
+#: the GNSS course is used above this speed, m/s
+COURSE_MIN_SPEED = 3.0
+#: time offsets searched by the pre-pass, s
+OFFSET_RANGE = 0.6
+
+
+@dataclass
+class MeasuredNoise:
+    """What :func:`measure_noise` found (SI units; ``None`` where nothing was still)."""
+
+    still_s: float
+    arw: float | None = None
+    vrw: float | None = None
+    gyro_bias: np.ndarray | None = None
+    gyro_bias_sigma: float | None = None
+    accel_error: float | None = None
+
+
+def _runs(mask):
+    """``(start, stop)`` index pairs of the True runs of a boolean array."""
+    d = np.diff(np.r_[0, mask.astype(np.int8), 0])
+    return list(zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1)))
+
+
+def still_mask(imu: ImuData, gnss: GnssData | None = None, *, window_s: float = 1.0) -> np.ndarray:
+    """Samples in still segments: runs of quiet 1 s windows (|f| steady, no turn) at least
+    :data:`STILL_MIN_S` long during which the GNSS (where it covers them) shows a stopped
+    vehicle: its speed below :data:`STILL_SPEED` where the file has velocity, else its fixes
+    within ``3σ + 0.5 m`` of their mean. Without GNSS an IMU-quiet run counts (an IMU cannot
+    tell rest from a steady cruise: prefer giving the GNSS)."""
+    n = len(imu.t)
+    m = max(2, int(round(window_s / imu.dt)))
+    nb = n // m
+    if nb < 2:
+        return np.zeros(n, bool)
+    fn = np.linalg.norm(imu.f_ib_b[: nb * m], axis=1).reshape(nb, m)
+    w = imu.omega_ib_b[: nb * m].reshape(nb, m, 3).mean(axis=1)
+    # quiet: specific-force magnitude steady to 0.2 m/s², no turn faster than 3 °/s
+    quiet = (fn.std(axis=1) < 0.2) & (np.abs(fn.mean(axis=1) - np.median(fn)) < 0.3) & (
+        np.linalg.norm(w - np.median(w, axis=0), axis=1) < 3.0 * DEG)
+    out = np.zeros(n, bool)
+    out[: nb * m] = np.repeat(quiet, m)
+    keep = np.zeros(n, bool)
+    f_win = imu.f_ib_b[: nb * m].reshape(nb, m, 3).mean(axis=1)
+    for a, b in _runs(out):
+        if (b - a) * imu.dt < STILL_MIN_S:
+            continue
+        if gnss is not None and not _gnss_stopped(gnss, imu.t[a], imu.t[b - 1]):
+            continue
+        # at rest the window means do not move: no braking, no pulling away, no creeping turn
+        ka, kb = a // m, b // m
+        if (np.max(np.linalg.norm(f_win[ka:kb] - f_win[ka:kb].mean(axis=0), axis=1)) > 0.1
+                or np.max(np.linalg.norm(w[ka:kb] - w[ka:kb].mean(axis=0), axis=1)) > 0.5 * DEG):
+            continue
+        keep[a:b] = True
+    return keep
+
+
+def _gnss_stopped(gnss: GnssData, t0, t1) -> bool:
+    """Does the GNSS show the vehicle stopped over [t0, t1]? (True where it has no fix.)"""
+    k = (gnss.t >= t0) & (gnss.t <= t1)
+    if k.sum() < 2:
+        return True
+    if gnss.velocity_n is not None and np.all(np.isfinite(gnss.velocity_n[k, :2])):
+        return bool(np.all(np.hypot(gnss.velocity_n[k, 0], gnss.velocity_n[k, 1]) < STILL_SPEED))
+    sig = gnss.sigma_m[k] if gnss.sigma_m is not None else np.full(int(k.sum()), 5.0)
+    sig = np.where(np.isfinite(sig), sig, 5.0)
+    p = enu_offset(gnss.lat[k][0], gnss.lon[k][0], 0.0, gnss.lat[k], gnss.lon[k], 0.0)[:, :2]
+    spread = np.hypot(*(p - p.mean(axis=0)).T)
+    return bool(np.all(spread <= 3.0 * sig + 0.5))
+
+
+def _white_density(x, dt):
+    """Conservative white-noise density of a rate record: ``max σ_A(τ)·√τ`` on WHITE_TAU;
+    ``None`` when the record is not noise at rest (the density grows with τ: motion, a drift)."""
+    tau, adev, _ = allan_deviation(x, dt)
+    sel = (tau >= WHITE_TAU[0]) & (tau <= WHITE_TAU[1])
+    if sel.sum() < 2:
+        return None
+    n = adev[sel] * np.sqrt(tau[sel])
+    if n[-1] > 3.0 * n[0]:
+        return None
+    return float(np.max(n))
+
+
+def measure_noise(imu: ImuData, still: np.ndarray) -> MeasuredNoise:
+    """White noise, gyro bias and accelerometer error from the still samples (module doc)."""
+    runs = [(a, b) for a, b in _runs(still) if (b - a) * imu.dt >= STILL_MIN_S]
+    if not runs:
+        return MeasuredNoise(0.0)
+    dt = imu.dt
+    dens_g, dens_a, weights = [], [], []
+    for a, b in runs:
+        w = imu.omega_ib_b[a:b]
+        f = imu.f_ib_b[a:b]
+        dg = [_white_density(w[:, k], dt) for k in range(3)]
+        da = [_white_density(f[:, k], dt) for k in range(3)]
+        if None in dg or None in da:
+            continue
+        # isotropic equivalents (the filter's noise is one figure per sensor triad)
+        dens_g.append(math.sqrt(np.mean(np.square(dg))))
+        dens_a.append(math.sqrt(np.mean(np.square(da))))
+        weights.append(b - a)
+    if not weights:
+        return MeasuredNoise(0.0)
+    idx = np.concatenate([np.arange(a, b) for a, b in runs])
+    w_mean = imu.omega_ib_b[idx].mean(axis=0)
+    f_norm = float(np.linalg.norm(imu.f_ib_b[idx].mean(axis=0)))
+    lat = imu.meta.get("lat")
+    g = float(normal_gravity(lat if lat is not None else np.radians(45.0)))
+    # the still mean is bias + Earth rate (direction unknown): σ covers the Earth-rate part
+    bias_sigma = math.hypot(OMEGA_EARTH, float(np.max(np.abs(w_mean))) * 0.1)
+    # the median over the still runs: one run with a door slammed does not decide
+    return MeasuredNoise(float(sum(weights) * dt), float(np.median(dens_g)),
+                         float(np.median(dens_a)), w_mean, bias_sigma, abs(f_norm - g))
+
+
+def estimate_time_offset(imu: ImuData, gnss: GnssData, *, search_s: float = OFFSET_RANGE):
+    """IMU time offset from the gyro heading against the GNSS course (module docstring).
+
+    Returns ``(offset_s, sigma_s)``: the offset to *add* to the IMU stamps; ``None`` when the
+    drive has too little turning, or no course (no velocity and fixes too noisy).
+    """
+    if gnss.velocity_n is not None and np.all(np.isfinite(gnss.velocity_n[:, :2])):
+        t = gnss.t
+        ve, vn = gnss.velocity_n[:, 0], gnss.velocity_n[:, 1]
+    else:
+        sig = gnss.sigma_m if gnss.sigma_m is not None else np.full(len(gnss.t), 5.0)
+        if len(gnss.t) < 5 or np.nanmedian(sig) > 1.0:
+            return None
+        p = enu_offset(gnss.lat[0], gnss.lon[0], 0.0, gnss.lat, gnss.lon, 0.0)
+        dtk = gnss.t[2:] - gnss.t[:-2]
+        ve = (p[2:, 0] - p[:-2, 0]) / dtk
+        vn = (p[2:, 1] - p[:-2, 1]) / dtk
+        t = gnss.t[1:-1]
+    speed = np.hypot(ve, vn)
+    inside = (t > imu.t[0] + search_s + 1.0) & (t < imu.t[-1] - search_s - 1.0)
+    m = (speed > COURSE_MIN_SPEED) & inside
+    if m.sum() < 20:
+        return None
+    u = imu.f_ib_b.mean(axis=0)
+    u = u / np.linalg.norm(u)
+    yaw_rate = imu.omega_ib_b @ u
+    dts = np.diff(imu.t, prepend=imu.t[0] - imu.dt)
+    # heading clockwise: minus the integral of the rate about "up"; rows are interval means
+    # ending at t, so the integral at t_k is exact at the sample stamps
+    psi = -np.concatenate([[0.0], np.cumsum(yaw_rate[1:] * dts[1:])])
+    course = np.arctan2(ve[m], vn[m])
+    tm = t[m]
+    seg = np.cumsum(np.r_[True, np.diff(np.flatnonzero(m)) > 1]) - 1
+    nseg = int(seg.max()) + 1
+    count = np.bincount(seg, minlength=nseg)
+    turn = np.abs(np.gradient(np.unwrap(course), tm))
+    if float(np.sum(turn > 5.0 * DEG)) < 8:
+        return None
+    t_c = tm - np.bincount(seg, tm, nseg)[seg] / count[seg]     # time less its stretch mean
+
+    def misfit(tau):
+        # course = ψ_gyro(t + τ) + a constant per stretch + one drift rate: the constants and
+        # the rate are removed in closed form (stretch means, then a common slope)
+        y = np.unwrap(course - np.interp(tm + tau, imu.t, psi))
+        y_c = y - np.bincount(seg, y, nseg)[seg] / count[seg]
+        b = float(t_c @ y_c) / max(float(t_c @ t_c), 1e-12)
+        r = np.angle(np.exp(1j * (y_c - b * t_c)))
+        return float(np.mean(r * r))
+
+    taus = np.arange(-search_s, search_s + 1e-9, 0.005)
+    f = np.array([misfit(x) for x in taus])
+    k = int(np.argmin(f))
+    if k in (0, len(taus) - 1):
+        return None
+    # parabola through the minimum and its neighbours
+    a, b, c = f[k - 1], f[k], f[k + 1]
+    den = a - 2 * b + c
+    step = 0.005
+    off = 0.5 * (a - c) / den * step if den > 0 else 0.0
+    tau = taus[k] + off
+    # σ from the curvature: misfit(τ) ≈ σ_r² + κ (τ − τ̂)²; var(τ̂) ≈ σ_r² / (n κ)
+    kappa = den / (2 * step * step)
+    sigma = math.sqrt(max(b, 1e-12) / (max(kappa, 1e-12) * len(tm))) if kappa > 0 else 0.1
+    # the IMU event at t_gnss + τ: the IMU stamps are late by τ, add −τ
+    return -float(tau), float(max(sigma, 0.002))
+
+
+def estimate_velocity_lag(gnss: GnssData, *, search_s: float = 0.5, span_s: float = 1.0):
+    """How late the GNSS velocity is against the positions, s (``None``: not measurable).
+
+    Receivers and post-processors often report the velocity of the *last* interval (a
+    position difference, or Doppler smoothed back in time) at the end of it. Over ``span_s``
+    the displacement between fixes must equal the integral of the velocity; the lag ``τ`` that
+    best makes it so (velocity taken at ``t + τ``) is searched on a 5 ms grid. Needs precise
+    positions (σ below 0.5 m) and velocities.
+    """
+    if gnss.velocity_n is None or len(gnss.t) < 20:
+        return None
+    sig = gnss.sigma_m if gnss.sigma_m is not None else np.full(len(gnss.t), 5.0)
+    if not np.nanmedian(sig) < 0.5:
+        return None
+    dt = float(np.median(np.diff(gnss.t)))
+    W = max(1, int(round(span_s / dt)))
+    p = enu_offset(gnss.lat[0], gnss.lon[0], 0.0, gnss.lat, gnss.lon, 0.0)[:, :2]
+    v = gnss.velocity_n[:, :2]
+    ok = np.all(np.isfinite(v), axis=1)
+    if ok.sum() < 2 * W + 5:
+        return None
+    h = np.diff(gnss.t)
+    close = np.r_[h <= 2.5 * dt]
+
+    def mismatch(tau):
+        vs = np.column_stack([np.interp(gnss.t + tau, gnss.t, v[:, k]) for k in range(2)])
+        cs = np.concatenate([[[0.0, 0.0]], np.cumsum(0.5 * (vs[1:] + vs[:-1]) * h[:, None], axis=0)])
+        e = (p[W:] - p[:-W]) - (cs[W:] - cs[:-W])
+        good = np.convolve(close.astype(float), np.ones(W), "valid") == W
+        return float(np.median(np.sum(e[good] ** 2, axis=1))) if good.any() else np.inf
+
+    taus = np.arange(-search_s, search_s + 1e-9, 0.005)
+    f = np.array([mismatch(x) for x in taus])
+    k = int(np.argmin(f))
+    if not np.isfinite(f[k]) or k in (0, len(taus) - 1):
+        return None
+    # worth it only when it clearly beats no shift
+    if f[k] > 0.5 * mismatch(0.0):
+        return 0.0
+    return float(taus[k])
+
+
+def shift_velocity(gnss: GnssData, lag_s: float) -> GnssData:
+    """A copy of ``gnss`` whose velocity at ``t`` is the one reported at ``t + lag_s``."""
+    out = gnss.copy()
+    if gnss.velocity_n is None or not lag_s:
+        return out
+    out.velocity_n = np.column_stack([np.interp(gnss.t + lag_s, gnss.t, gnss.velocity_n[:, k])
+                                      for k in range(3)])
+    return out
+
+
+def combine(prior: ImuNoise, measured: MeasuredNoise) -> tuple[ImuNoise, list]:
+    """The prior noise where the data is quieter, the measured one where it is noisier.
+
+    Returns the noise and the list of what the data overruled (for one warning line).
+    """
+    out = dataclasses.replace(prior)
+    notes = []
+    if measured.arw is not None and measured.arw > NOISIER_THAN_PRIOR * prior.arw:
+        notes.append(f"gyro noise {measured.arw / (DEG / 60):.3g} °/√h vs {prior.arw / (DEG / 60):.3g}")
+        out.arw = measured.arw
+    if measured.vrw is not None and measured.vrw > NOISIER_THAN_PRIOR * prior.vrw:
+        notes.append(f"accelerometer noise {measured.vrw * 60:.3g} m/s/√h vs {prior.vrw * 60:.3g}")
+        out.vrw = measured.vrw
+    if measured.gyro_bias is not None:
+        b = float(np.max(np.abs(measured.gyro_bias)))
+        if b > NOISIER_THAN_PRIOR * max(prior.gyro_bias_sigma, OMEGA_EARTH):
+            notes.append(f"gyro bias {b / (DEG / 3600):.3g} °/h vs {prior.gyro_bias_sigma / (DEG / 3600):.3g}")
+            out.gyro_bias_sigma = max(prior.gyro_bias_sigma, b)
+            out.gyro_bias_instability = max(prior.gyro_bias_instability, 0.01 * b)
+    if measured.accel_error is not None and measured.accel_error > NOISIER_THAN_PRIOR * prior.accel_bias_sigma:
+        notes.append(f"accelerometer error {measured.accel_error:.3g} m/s² vs {prior.accel_bias_sigma:.3g}")
+        out.accel_bias_sigma = measured.accel_error
+        out.accel_bias_instability = max(prior.accel_bias_instability, 0.01 * measured.accel_error)
+    if notes:
+        out.grade = f"{prior.grade}, raised to the measured noise"
+    return out, notes
+
+
+class NoiseAdapter:
+    """The safety net when the noise model is still too optimistic (module docstring, item 3).
+
+    Two corrections, both driven only by trusted fixes and both bounded:
+
+    * ``λ`` (the filter's process-noise scale) rises when the main filter's normalised
+      innovations stay above their dimension (the INS is more uncertain than it says) and
+      decays back to 1 otherwise — never below: a preset or a measurement is not lowered by a
+      few quiet minutes, which would leave the next outage overconfident;
+    * the shadows' σ inflation (their χ² test of fixes) follows the shadows' own
+      dead-reckoning errors over 5–90 s against their σ, between ``sigma_scale`` and
+      ``shadow_scale_max``: a shadow that is honestly uncertain must not reject clean fixes.
+
+    Parameters
+    ----------
+    hi : largest ``λ``
+    up_step : largest factor one fix may raise ``λ`` by
+    decay : factor per trusted fix back towards 1
+    memory : fixes (or shadow tests) over which the normalised errors are averaged
+    trigger : mean NIS per dimension above which ``λ`` rises
+    """
+
+    def __init__(self, sigma_scale=2.0, shadow_scale_max=10.0, hi=1e4, up_step=1.1,
+                 decay=0.995, memory=40, trigger=2.0):
+        self.hi, self.up_step, self.decay, self.trigger = hi, up_step, decay, trigger
+        self.alpha = 1.0 / memory
+        self.base_scale, self.scale_max = sigma_scale, shadow_scale_max
+        self.fix_ratio = 1.0     # running mean of NIS/dof of trusted fixes
+        self.dr_ratio = 1.0      # running mean of shadow χ²/dof at trusted fixes
+        self.updates = 0
+        self.raised = False
+
+    @property
+    def shadow_scale(self) -> float:
+        """σ inflation of the shadows' fix test."""
+        return float(np.clip(self.base_scale * np.sqrt(max(self.dr_ratio, 1.0)),
+                             self.base_scale, self.scale_max))
+
+    def on_fix(self, flt, nis_value, dof):
+        """A trusted fix with normalised innovation ``nis_value`` of ``dof`` dimensions."""
+        x = min(nis_value / dof, 25.0)
+        self.fix_ratio += self.alpha * (x - self.fix_ratio)
+        if self.fix_ratio > self.trigger:
+            k = min(self.up_step, (self.fix_ratio / self.trigger) ** 0.25)
+        else:
+            k = self.decay
+        new = float(np.clip(flt.q_scale * k, 1.0, self.hi))
+        if new != flt.q_scale:
+            flt.q_scale = new
+            self.updates += 1
+            self.raised = self.raised or new > 3.0
+
+    def on_shadow(self, chi2_value, dof):
+        """A trusted fix against a mature shadow (its dead-reckoning error over 5–90 s)."""
+        x = min(chi2_value / dof, 25.0)
+        self.dr_ratio += self.alpha * (x - self.dr_ratio)
+
+
+def calibrated_config(cfg: FilterConfig, imu: ImuData, gnss: GnssData | None = None):
+    """``cfg`` with its IMU noise raised to what the still data shows; returns
+    ``(cfg, measured, notes)``."""
+    still = still_mask(imu, gnss)
+    measured = measure_noise(imu, still)
+    noise, notes = combine(cfg.imu, measured)
+    return dataclasses.replace(cfg, imu=noise), measured, notes
+
+
+def grade_noise(grade: str) -> ImuNoise:
+    """The prior noise of a grade (``auto``: the consumer preset, the widest)."""
+    key = sensors.grade_key(grade)
+    key = "consumer" if key == "auto" else key
+    return ImuNoise.from_model(sensors.GRADES[key], key)
+
+
+__all__ = ["MeasuredNoise", "still_mask", "measure_noise", "estimate_time_offset",
+           "estimate_velocity_lag", "shift_velocity", "combine",
+           "NoiseAdapter", "calibrated_config", "grade_noise"]

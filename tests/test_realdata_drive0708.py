@@ -1,0 +1,118 @@
+"""Real drive rtklibexplorer drive_0708 (consumer MEMS on a car roof, 4 Hz RTK as truth) through
+the navigator with its DEFAULT options (issue 10): what a new user gets.
+
+Figures measured 2026-12-01 (docs/ekf.md, ``python experiments/drive_0708.py``): all fixes
+0.03–0.04 m RMS, 0.2 m max; every ``--grade`` 0.04 m; IMU stamps ±0.3 s off: the reported
+offset moves by the shift to 3 ms; 30 s outages: 3–7 m at their ends; 3 minutes of 200 m
+outliers, positions only: window max 25–30 m, back to centimetres 30 s after the window.
+"""
+import json
+
+import numpy as np
+import pytest
+
+import selfnav
+from selfnav.earth import radii
+from selfnav.sensors import with_outages, with_outliers
+from support import run_cli
+
+pytestmark = pytest.mark.slow
+
+
+@pytest.fixture(scope="module")
+def drive(shared_data):
+    d = shared_data / "rtklibexplorer_drive_0708"
+    return d, selfnav.read_imu(d / "imu_1934.csv"), selfnav.read_gnss(d / "gnss_1934_sf.pos")
+
+
+def _errors(sol, truth):
+    tr = sol.trajectory
+    m = (tr.t >= truth.t[0]) & (tr.t <= truth.t[-1])
+    t = tr.t[m]
+    lat = np.interp(t, truth.t, truth.lat)
+    lon = np.interp(t, truth.t, truth.lon)
+    rm, rn = radii(lat)
+    return t, np.hypot((tr.lat[m] - lat) * rm, (tr.lon[m] - lon) * rn * np.cos(lat))
+
+
+def test_cli_defaults_on_clean_rtk(drive, tmp_path, capsys):
+    """The documented command, nothing tuned: ≤ 0.15 m RMS, ≤ 1 m max against the RTK file,
+    judged by ``selfnav evaluate`` with the .pos as truth; the JSON reports the time offset
+    (upstream's −0.125 s included) and the lever arm."""
+    d, _, _ = drive
+    sol = tmp_path / "sol.csv"
+    log = tmp_path / "fixes.csv"
+    code, out, err = run_cli(["navigate", "--imu", d / "imu_1934.csv", "--gnss",
+                              d / "gnss_1934_sf.pos", "--out", sol, "--fix-log", log, "--json"],
+                             capsys)
+    assert code == 0, err
+    s = json.loads(out)
+    assert -0.26 < s["imu_time_offset_s"] < -0.15          # the earlier innovation scan: −0.20
+    assert s["imu_time_offset_format_s"] == -0.125
+    assert len(s["lever_arm_m"]) == 3 and max(map(abs, s["lever_arm_m"])) < 0.5
+    assert s["rejected"] == 0 and s["position_of"] == "antenna"
+    code, out, err = run_cli(["evaluate", "--truth", d / "gnss_1934_sf.pos", "--solution", sol,
+                              "--json"], capsys)
+    assert code == 0, err
+    m = json.loads(out)
+    assert m["horizontal_rms_m"] <= 0.15 and m["horizontal_max_m"] <= 1.0
+    head = sol.read_text().splitlines()[2]
+    assert head.endswith("sigma_h_m,gnss")
+    rows = log.read_text().splitlines()
+    assert rows[2].startswith("t,status,reason,nis_h")
+    assert sum(r.split(",")[1] == "used" for r in rows[3:]) > 1900
+
+
+@pytest.mark.parametrize("grade", ["navigation", "industrial"])
+def test_every_preset_reaches_the_same_accuracy(drive, grade):
+    """A preset is a prior: the data's noise wins (one warning), ≤ 0.3 m RMS, ≤ 2 m max."""
+    _, imu, truth = drive
+    with pytest.warns(selfnav.errors.SelfnavWarning, match="noisier than"):
+        sol = selfnav.navigate(imu, truth, grade=grade)
+    _, e = _errors(sol, truth)
+    assert np.sqrt(np.mean(e**2)) <= 0.3 and e.max() <= 2.0
+
+
+@pytest.mark.parametrize("shift", [-0.3, 0.25])
+def test_time_offset_is_found(drive, shift):
+    """IMU stamps shifted: the reported total offset moves by the shift (±0.03 s)."""
+    _, imu, truth = drive
+    base = selfnav.navigate(imu, truth).stats["imu_time_offset_s"]
+    sol = selfnav.navigate(imu.shifted(shift), truth)
+    assert sol.stats["imu_time_offset_s"] - base == pytest.approx(-shift, abs=0.03)
+    _, e = _errors(sol, truth)
+    assert np.sqrt(np.mean(e**2)) <= 0.3
+
+
+def test_outages_every_two_minutes(drive):
+    """30 s without fixes every 120 s: ≤ 10 m just before each outage ends; the smoother
+    closes them to a metre."""
+    _, imu, truth = drive
+    g, ends = with_outages(truth)
+    for smooth, bound in ((False, 10.0), (True, 1.0)):
+        sol = selfnav.navigate(imu, g, smooth=smooth)
+        t, e = _errors(sol, truth)
+        at_end = [e[max(0, np.searchsorted(t, te) - 1)] for te in ends]
+        assert max(at_end) <= bound, (smooth, at_end)
+
+
+@pytest.mark.parametrize("kind", ["white", "drift"])
+def test_outliers_positions_only(drive, kind):
+    """3 minutes of unflagged 200 m σ outliers and no GNSS velocity (positions only): inside
+    the window the filter stays near the dead-reckoning bound (the same 3 minutes with no
+    fixes at all), and it is back on the RTK 30 s after the window — not lost. The plain χ²
+    gate, for contrast, is lost after the white window."""
+    _, imu, truth = drive
+    start = truth.t[0] + 200.0
+    g = with_outliers(truth, start, 180.0, kind=kind, seed=1, velocity="drop")
+    t, e = _errors(selfnav.navigate(imu, g), truth)
+    w = (t >= start) & (t < start + 180.0)
+    after = t >= start + 210.0
+    g0 = g.select(~((g.t >= start) & (g.t < start + 180.0)))
+    t0, e0 = _errors(selfnav.navigate(imu, g0), truth)
+    bound = e0[(t0 >= start) & (t0 < start + 180.0)].max()
+    assert e[w].max() < 1.5 * bound + 10.0, (e[w].max(), bound)
+    assert e[after].max() < 1.0
+    if kind == "white":
+        t, e = _errors(selfnav.navigate(imu, g, window_test=False), truth)
+        assert np.sqrt(np.mean(e[t >= start + 210.0] ** 2)) > 5.0
