@@ -10,7 +10,7 @@ GOST 32453-2017 (PZ-90.11); Krasovsky 1940 ellipsoid (SK-42).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -45,27 +45,20 @@ class Ellipsoid:
     gm: float = 3.986004418e14
     omega: float = OMEGA_EARTH
 
-    @property
-    def f(self) -> float:
-        return 1.0 / self.inv_f
+    # derived constants, computed once (the filters read them at every epoch)
+    f: float = field(init=False, repr=False)
+    b: float = field(init=False, repr=False)
+    e2: float = field(init=False, repr=False)        # first eccentricity squared
+    k_somigliana: float = field(init=False, repr=False)
+    m: float = field(init=False, repr=False)         # ω² a² b / GM (TR8350.2)
 
-    @property
-    def b(self) -> float:
-        return self.a * (1.0 - self.f)
-
-    @property
-    def e2(self) -> float:
-        """First eccentricity squared."""
-        return self.f * (2.0 - self.f)
-
-    @property
-    def k_somigliana(self) -> float:
-        return (self.b * self.gamma_p) / (self.a * self.gamma_e) - 1.0
-
-    @property
-    def m(self) -> float:
-        """omega^2 a^2 b / GM (TR8350.2)."""
-        return self.omega**2 * self.a**2 * self.b / self.gm
+    def __post_init__(self):
+        f = 1.0 / self.inv_f
+        b = self.a * (1.0 - f)
+        for name, value in (("f", f), ("b", b), ("e2", f * (2.0 - f)),
+                            ("k_somigliana", (b * self.gamma_p) / (self.a * self.gamma_e) - 1.0),
+                            ("m", self.omega**2 * self.a**2 * b / self.gm)):
+            object.__setattr__(self, name, value)
 
 
 WGS84 = Ellipsoid("WGS-84", 6378137.0, 298.257223563, 9.7803253359, 9.8321849378)

@@ -49,6 +49,8 @@ STILL_SPEED = 0.3
 WHITE_TAU = (0.3, 3.0)
 #: the measured noise wins over the prior when it is this many times larger (and is reported)
 NOISIER_THAN_PRIOR = 2.0
+#: seconds of still data after which the measured white noise replaces the prior both ways
+WHITE_TRUST_S = 20.0
 #: the GNSS course is used above this speed, m/s
 COURSE_MIN_SPEED = 3.0
 #: time offsets searched by the pre-pass, s
@@ -93,17 +95,22 @@ def still_mask(imu: ImuData, gnss: GnssData | None = None, *, window_s: float = 
     out[: nb * m] = np.repeat(quiet, m)
     keep = np.zeros(n, bool)
     f_win = imu.f_ib_b[: nb * m].reshape(nb, m, 3).mean(axis=1)
+    blk = max(1, int(round(STILL_MIN_S / window_s)))      # windows per block
     for a, b in _runs(out):
-        if (b - a) * imu.dt < STILL_MIN_S:
-            continue
-        if gnss is not None and not _gnss_stopped(gnss, imu.t[a], imu.t[b - 1]):
-            continue
-        # at rest the window means do not move: no braking, no pulling away, no creeping turn
+        # judge each run block by block: a stop ends with the car pulling away, and the
+        # blocks before that are still
         ka, kb = a // m, b // m
-        if (np.max(np.linalg.norm(f_win[ka:kb] - f_win[ka:kb].mean(axis=0), axis=1)) > 0.1
-                or np.max(np.linalg.norm(w[ka:kb] - w[ka:kb].mean(axis=0), axis=1)) > 0.5 * DEG):
-            continue
-        keep[a:b] = True
+        for j0 in range(ka, kb - blk + 1, blk):
+            j1 = j0 + blk if kb - (j0 + blk) >= blk else kb
+            i0, i1 = j0 * m, min(j1 * m, n)
+            if gnss is not None and not _gnss_stopped(gnss, imu.t[i0], imu.t[i1 - 1]):
+                continue
+            # at rest the window means do not move: no braking, no pulling away, no turn
+            if (np.max(np.linalg.norm(f_win[j0:j1] - f_win[j0:j1].mean(axis=0), axis=1)) > 0.1
+                    or np.max(np.linalg.norm(w[j0:j1] - w[j0:j1].mean(axis=0), axis=1))
+                    > 0.5 * DEG):
+                continue
+            keep[i0:i1] = True
     return keep
 
 
@@ -294,10 +301,16 @@ def combine(prior: ImuNoise, measured: MeasuredNoise) -> tuple[ImuNoise, list]:
     notes = []
     if measured.arw is not None and measured.arw > NOISIER_THAN_PRIOR * prior.arw:
         notes.append(f"gyro noise {measured.arw / (DEG / 60):.3g} °/√h vs {prior.arw / (DEG / 60):.3g}")
-        out.arw = measured.arw
     if measured.vrw is not None and measured.vrw > NOISIER_THAN_PRIOR * prior.vrw:
         notes.append(f"accelerometer noise {measured.vrw * 60:.3g} m/s/√h vs {prior.vrw * 60:.3g}")
+    # white noise is what a still segment measures well: it replaces the prior both ways
+    # (after WHITE_TRUST_S of still data); the bias terms it cannot measure only go up
+    if measured.still_s >= WHITE_TRUST_S:
+        out.arw = measured.arw
         out.vrw = measured.vrw
+    else:
+        out.arw = max(prior.arw, measured.arw or 0.0)
+        out.vrw = max(prior.vrw, measured.vrw or 0.0)
     if measured.gyro_bias is not None:
         b = float(np.max(np.abs(measured.gyro_bias)))
         if b > NOISIER_THAN_PRIOR * max(prior.gyro_bias_sigma, OMEGA_EARTH):
@@ -314,34 +327,41 @@ def combine(prior: ImuNoise, measured: MeasuredNoise) -> tuple[ImuNoise, list]:
 
 
 class NoiseAdapter:
-    """The safety net when the noise model is still too optimistic (module docstring, item 3).
+    """The noise the data shows, online (module docstring, item 3).
 
-    Two corrections, both driven only by trusted fixes and both bounded:
+    Driven only by trusted fixes, every step bounded:
 
     * ``λ`` (the filter's process-noise scale) rises when the main filter's normalised
       innovations stay above their dimension (the INS is more uncertain than it says) and
-      decays back to 1 otherwise — never below: a preset or a measurement is not lowered by a
-      few quiet minutes, which would leave the next outage overconfident;
-    * the shadows' σ inflation (their χ² test of fixes) follows the shadows' own
-      dead-reckoning errors over 5–90 s against their σ, between ``sigma_scale`` and
-      ``shadow_scale_max``: a shadow that is honestly uncertain must not reject clean fixes.
+      decays back to 1 otherwise — never below: a few quiet minutes must not leave the next
+      outage overconfident;
+    * ``λ_b`` (the scale of the slowly varying part: bias instability, lever arm, time
+      offset) follows the shadows' dead-reckoning errors over 5–90 s against their σ, both
+      ways, between ``bias_lo`` and ``bias_hi``: the horizon where that part decides, and the
+      part a still segment cannot measure;
+    * the shadows' σ inflation (their χ² test of fixes) follows the same errors, between
+      ``sigma_scale`` and ``shadow_scale_max``: an honestly uncertain shadow must not reject
+      clean fixes.
 
     Parameters
     ----------
     hi : largest ``λ``
-    up_step : largest factor one fix may raise ``λ`` by
-    decay : factor per trusted fix back towards 1
+    up_step : largest factor one fix may raise ``λ`` (or ``λ_b``) by
+    decay : factor per trusted fix back towards 1 (``λ``), and ``λ_b``'s step down
     memory : fixes (or shadow tests) over which the normalised errors are averaged
-    trigger : mean NIS per dimension above which ``λ`` rises
+    trigger : mean normalised error per dimension above which the scales rise; below its
+        inverse ``λ_b`` falls
     """
 
     def __init__(self, sigma_scale=2.0, shadow_scale_max=10.0, hi=1e4, up_step=1.1,
-                 decay=0.995, memory=40, trigger=2.0):
+                 decay=0.995, memory=40, trigger=2.0, bias_lo=0.01, bias_hi=100.0):
         self.hi, self.up_step, self.decay, self.trigger = hi, up_step, decay, trigger
+        self.bias_lo, self.bias_hi = bias_lo, bias_hi
         self.alpha = 1.0 / memory
         self.base_scale, self.scale_max = sigma_scale, shadow_scale_max
         self.fix_ratio = 1.0     # running mean of NIS/dof of trusted fixes
         self.dr_ratio = 1.0      # running mean of shadow χ²/dof at trusted fixes
+        self.dr_samples = 0
         self.updates = 0
         self.raised = False
 
@@ -365,10 +385,20 @@ class NoiseAdapter:
             self.updates += 1
             self.raised = self.raised or new > 3.0
 
-    def on_shadow(self, chi2_value, dof):
+    def on_shadow(self, flt, chi2_value, dof):
         """A trusted fix against a mature shadow (its dead-reckoning error over 5–90 s)."""
         x = min(chi2_value / dof, 25.0)
         self.dr_ratio += self.alpha * (x - self.dr_ratio)
+        self.dr_samples += 1
+        if self.dr_samples < 1.0 / self.alpha:
+            return
+        if self.dr_ratio > self.trigger:
+            k = min(self.up_step, (self.dr_ratio / self.trigger) ** 0.25)
+        elif self.dr_ratio < 1.0 / self.trigger:
+            k = max(self.decay, (self.dr_ratio * self.trigger) ** 0.25)
+        else:
+            return
+        flt.bias_scale = float(np.clip(flt.bias_scale * k, self.bias_lo, self.bias_hi))
 
 
 def calibrated_config(cfg: FilterConfig, imu: ImuData, gnss: GnssData | None = None):

@@ -73,6 +73,7 @@ class DeadReckoningGuard:
     def __init__(self, cfg):
         self.cfg = cfg
         self.shadows = []          # [t_branch, filter], oldest first
+        self.last_chi2 = []        # the last fix's χ² against each mature shadow
         self._buf = []             # IMU blocks since the last shadow step
         self._t_step = -np.inf
         self.alarms = 0
@@ -138,16 +139,24 @@ class DeadReckoningGuard:
     def rejects(self, t, lat, lon, h, sigma_h, scale=1.0):
         """The oldest mature shadow (its entry) that rejects the fix (horizontal χ²), or None.
 
-        ``scale`` inflates the shadows' σ (``dr_sigma_scale``: an EKF's dead-reckoning
+        ``scale`` inflates the shadows' σ (``sigma_scale``: an EKF's dead-reckoning
         covariance is optimistic after the alignment, and a false alarm costs a reset).
+        The fix's χ² (2 dof, σ not inflated) against every mature shadow is kept in
+        :attr:`last_chi2` for the noise calibration.
         """
         self._flush()
+        self.last_chi2 = []
+        found = None
+        R = np.eye(2) * sigma_h**2
         for e in self.mature(t):
             r, H = e[1].position_residual(lat, lon, h)
-            S = (H @ e[1].P @ H.T)[:2, :2] * scale**2 + np.eye(2) * sigma_h**2
-            if float(r[:2] @ np.linalg.solve(S, r[:2])) > self.cfg.shadows.shadow_gate:
-                return e
-        return None
+            HPH = (H[:2] @ e[1].P @ H[:2].T)
+            d = r[:2]
+            self.last_chi2.append(float(d @ np.linalg.solve(HPH + R, d)))
+            if found is None and float(d @ np.linalg.solve(HPH * scale**2 + R, d)) > \
+                    self.cfg.shadows.shadow_gate:
+                found = e
+        return found
 
     def dragged(self, t, flt, scale=1.0):
         """The oldest mature shadow from which ``flt`` has moved farther than the two

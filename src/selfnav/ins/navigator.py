@@ -284,10 +284,12 @@ class StreamingNavigator:
         f = np.concatenate(self._buf_f)
         dt = np.concatenate(self._buf_dt)
         self._buf_t, self._buf_w, self._buf_f, self._buf_dt = [], [], [], []
-        p0 = (flt.ins.lat, flt.ins.lon, flt.ins.h)
-        flt.predict(t, w * dt[:, None], f * dt[:, None])
-        self._block = (t, w * dt[:, None], f * dt[:, None])
-        self.disp += enu_offset(*p0, flt.ins.lat, flt.ins.lon, flt.ins.h)
+        s = flt.ins.state_array()
+        p0 = (s[0], s[1], s[2])
+        dth, dv = w * dt[:, None], f * dt[:, None]
+        flt.predict(t, dth, dv)
+        self._block = (t, dth, dv)
+        self.disp += enu_offset(*p0, s[0], s[1], s[2])
         return w, f
 
     def _store(self, te, Pm, dx):
@@ -397,6 +399,8 @@ class StreamingNavigator:
             reason = f"χ² gate (NIS {nis_h:.3g})"
         ok_v = nis_v <= CHI2_1_999 * (out.soft_gate if soft else 1.0)
         guard = self.guard
+        if guard is not None:
+            guard.last_chi2 = []
         shadow_rej = None if (guard is None or self.suspect) else guard.rejects(
             fx.t, fx.lat, fx.lon, fx.h, fx.sigma_h, self._shadow_scale())
         win_ok = True
@@ -493,14 +497,11 @@ class StreamingNavigator:
             self.adapter.on_fix(flt, q, 2)
 
     def _adapt(self, fx, nis_h):
-        ad, flt = self.adapter, self.flt
-        ad.on_fix(flt, nis_h, 2)
-        if self.guard is None:
-            return
-        for _, sh in self.guard.mature(fx.t):
-            r, H = sh.position_residual(fx.lat, fx.lon, fx.h)
-            S = (H @ sh.P @ H.T)[:2, :2] + np.eye(2) * fx.sigma_h**2
-            ad.on_shadow(float(r[:2] @ np.linalg.solve(S, r[:2])), 2)
+        ad = self.adapter
+        ad.on_fix(self.flt, nis_h, 2)
+        if self.guard is not None:
+            for c in self.guard.last_chi2:      # this fix against each mature shadow
+                ad.on_shadow(self.flt, c, 2)
 
     def _shadow_scale(self):
         return (self.cfg.shadows.sigma_scale if self.adapter is None
@@ -671,6 +672,7 @@ class StreamingNavigator:
                  "shadow_resets": 0 if self.guard is None else self.guard.alarms,
                  "ins_widened": self.ins_widened, "reinitialisations": self.reinits,
                  "noise_scale": float(self.flt.q_scale),
+                 "bias_noise_scale": float(self.flt.bias_scale),
                  "shadow_sigma_scale": float(self._shadow_scale())}
         fix_log = {k: np.asarray(v) for k, v in self.log.items()}
         fix_log["status"] = np.array([STATUS[c] for c in st], dtype=object)

@@ -314,6 +314,7 @@ class Strapdown:
         self.deflection = np.asarray(deflection, dtype=float)
         self.anomaly = np.asarray(anomaly, dtype=float)
         self.h_ref = np.asarray(h if h_ref is None else h_ref, dtype=float)
+        self._fixed = None     # constant gravity inputs of advance(), built on first use
 
     # ---- state access
     def set_state(self, *, lat=None, lon=None, h=None, velocity_n=None, C_nb=None, check=True):
@@ -337,6 +338,11 @@ class Strapdown:
             if check and not np.allclose(C @ C.T, np.eye(3), atol=1e-6):
                 raise SelfnavError("C_nb is not a rotation matrix")
             s[6:15] = C.T.reshape(9)
+
+    def state_array(self) -> np.ndarray:
+        """The live state vector (lat, lon, h, v^n (3), C_b^n row-major (9)) for filters that
+        correct it in place (compiled kernels); keep ``C_b^n`` a rotation."""
+        return self._s
 
     @property
     def lat(self) -> float:
@@ -392,6 +398,23 @@ class Strapdown:
                   None if anomaly is None else [anomaly])
         self.t += dt
         return self.state
+
+    def advance(self, t, dt, dtheta, dv):
+        """The filter's fast path of :meth:`run`: advance over intervals of lengths ``dt``
+        ending at times ``t`` (C-contiguous float64 arrays, checked by the caller) with the
+        constructor's gravity options; returns the last attitude ``C_nb``."""
+        n = dtheta.shape[0]
+        pos = np.empty((n, 3))
+        vel = np.empty((n, 3))
+        C = np.empty((n, 3, 3))
+        if self._fixed is None:
+            self._fixed = (_per_sample(self.deflection, n, 2, "deflection"),
+                           _per_sample(self.anomaly, n, 0, "anomaly"),
+                           _per_sample(self.h_ref, n, 0, "h_ref"))
+        defl, anom, href = self._fixed
+        _mechanize(dtheta, dv, dt, defl, anom, href, self._s, self._p, self._prm, pos, vel, C)
+        self.t = float(t[-1])
+        return C[-1]
 
     def run(self, t, dtheta, dv, *, h_ref=None, deflection=None, anomaly=None) -> Trajectory:
         """Advance over a batch of intervals ending at times ``t`` (N,); returns the N new states.
