@@ -72,11 +72,11 @@ def test_navigate_bad_input(sim, tmp_path, capsys):
     _err(capsys, ["navigate", "--imu", tmp_path / "none.csv", "--gnss", gnss, "--out", out],
          "none.csv", "no such file")
     _err(capsys, ["navigate", "--imu", imu, "--gnss", gnss, "--out", out, "--method", "kalman"],
-         "unknown method")
+         "'--method'", "kalman", "ekf, seed")
     _err(capsys, ["navigate", "--imu", imu, "--gnss", gnss, "--out", out, "--lever-arm", "1,2"],
          "--lever-arm")
     _err(capsys, ["navigate", "--imu", imu, "--gnss", gnss, "--out", out, "--grade", "superb"],
-         "unknown grade")
+         "'--grade'", "superb", "consumer")
     # GNSS on another time base (seconds of week vs seconds of day)
     lines = gnss.read_text().splitlines()
     shifted = tmp_path / "shifted.csv"

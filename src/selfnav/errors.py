@@ -37,3 +37,29 @@ class InputError(SelfnavError):
 
 class NotAtRestError(SelfnavError):
     """Data that a static method cannot use because the unit was moving."""
+
+
+class OutputError(SelfnavError):
+    """An output path selfnav cannot or will not write (a folder named as a file, a special
+    file, a file in the way of a folder, no permission): one line naming the path."""
+
+    def __init__(self, path, message: str):
+        self.path = str(path)
+        super().__init__(f"{self.path}: {message}")
+
+
+class Interrupted(BaseException):
+    """Ctrl-C inside the command line (a ``BaseException`` like ``KeyboardInterrupt``, so that
+    no ``except Exception`` swallows it and no library turns it into something else)."""
+
+
+class SelfnavWarning(UserWarning):
+    """Something the user should know, said in one line: the command line prints each as
+    ``selfnav: warning: <message>`` on stderr; in Python it is an ordinary warning."""
+
+
+def warn(message: str, *, stacklevel: int = 2) -> None:
+    """Issue ``message`` as a :class:`SelfnavWarning` (one line, no newlines)."""
+    import warnings
+
+    warnings.warn(str(message).replace("\n", " "), SelfnavWarning, stacklevel=stacklevel + 1)

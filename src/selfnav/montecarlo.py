@@ -27,8 +27,12 @@ Registering a pair is one call::
 """
 from __future__ import annotations
 
+import contextlib
 import logging
 import os
+import signal
+import threading
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
@@ -180,9 +184,11 @@ register_pair("static-latitude", run_static_latitude, unit="deg",
 def run_chunk(run: Callable, indices, seeds, params: dict) -> list[dict]:
     """Run a batch of seeds (one Dask task). Each row gets ``run`` (index) and ``seed``."""
     rows = []
-    for i, s in zip(indices, seeds):
-        r = run(int(s), params)
-        rows.append({"run": int(i), "seed": int(s), **r})
+    with warnings.catch_warnings():  # a run's notes are not the user's: the summary speaks
+        warnings.simplefilter("ignore")
+        for i, s in zip(indices, seeds):
+            r = run(int(s), params)
+            rows.append({"run": int(i), "seed": int(s), **r})
     return rows
 
 
@@ -278,12 +284,32 @@ def local_cluster(workers: int):
     key = "MALLOC_TRIM_THRESHOLD_"
     saved = os.environ.pop(key, None)  # a nanny of an earlier cluster may have exported it
     try:
-        with dask.config.set({f"distributed.nanny.pre-spawn-environ.{key}": None}):
+        # the worker processes inherit an ignored SIGINT: Ctrl-C reaches this process only,
+        # which then shuts the cluster down (no traceback from every worker)
+        with _sigint_ignored(), dask.config.set(
+                {f"distributed.nanny.pre-spawn-environ.{key}": None}):
             return LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
                                 dashboard_address=None, silence_logs=logging.ERROR)
     finally:
         if saved is not None:
             os.environ[key] = saved
+
+
+@contextlib.contextmanager
+def _sigint_ignored():
+    """Start child processes with SIGINT ignored (they keep ignoring it), while a Ctrl-C that
+    arrives meanwhile stays pending for this process (blocked, not lost) and is delivered at
+    the end of the block."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    old = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, old)
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
 
 
 def run_montecarlo(name: str, runs: int, *, seed: int = 0, params: dict | None = None,
