@@ -1,6 +1,8 @@
 """User-facing errors: one line, naming the file, the row or column and the likely cause."""
 from __future__ import annotations
 
+import threading
+
 
 class SelfnavError(Exception):
     """An error the command line reports as one line (no traceback) with a non-zero exit."""
@@ -51,6 +53,18 @@ class OutputError(SelfnavError):
 class Interrupted(BaseException):
     """Ctrl-C inside the command line (a ``BaseException`` like ``KeyboardInterrupt``, so that
     no ``except Exception`` swallows it and no library turns it into something else)."""
+
+
+#: Set by the command line's Ctrl-C handler. The exception it raises can still be lost when the
+#: handler happens to run inside a finalizer or a library callback ("Exception ignored in ...");
+#: long waiting loops (the Monte Carlo's) check this too.
+interrupt_requested = threading.Event()
+
+
+def check_interrupt() -> None:
+    """Raise :class:`Interrupted` if Ctrl-C was pressed (see :data:`interrupt_requested`)."""
+    if interrupt_requested.is_set():
+        raise Interrupted()
 
 
 class SelfnavWarning(UserWarning):

@@ -24,7 +24,7 @@ import warnings
 
 import typer
 
-from selfnav.errors import Interrupted, SelfnavError, SelfnavWarning
+from selfnav.errors import Interrupted, SelfnavError, SelfnavWarning, interrupt_requested
 
 app = typer.Typer(
     name="selfnav",
@@ -95,13 +95,16 @@ def _interrupt_as_error():
         return
 
     def handler(signum, frame):
+        interrupt_requested.set()
         raise Interrupted()
 
+    interrupt_requested.clear()
     old = signal.signal(signal.SIGINT, handler)
     try:
         yield
     finally:
         signal.signal(signal.SIGINT, old)
+        interrupt_requested.clear()
 
 
 def _usage_line(e) -> str:
@@ -115,7 +118,10 @@ def _run(argv) -> int:
     try:
         with _interrupt_as_error(), _one_line_warnings():
             rv = app(args=argv, standalone_mode=False, prog_name="selfnav")
-        return int(rv) if isinstance(rv, int) else 0
+        code = int(rv) if isinstance(rv, int) else 0
+        if code == 130:  # typer's answer to a KeyboardInterrupt it caught
+            print("selfnav: interrupted", file=sys.stderr)
+        return code
     except SelfnavError as e:
         print(f"selfnav: error: {' '.join(str(e).split())}", file=sys.stderr)
         return e.exit_code

@@ -96,9 +96,10 @@ class ImuGap:
     duration: float
 
     def describe(self) -> str:
-        """``"a 60.0 s IMU gap at t = 1234.56 s (6000 samples missing)"``."""
-        return (f"a {self.duration:.4g} s IMU gap at t = {self.t_before:.3f} s "
-                f"({self.missing} samples missing)")
+        """``"a 60 s IMU gap at t = 1234.560 s (6000 samples missing)"``."""
+        d = self.duration
+        span = f"{d / 3600:.3g} h" if d >= 3600 else f"{d:.4g} s"
+        return f"a {span} IMU gap at t = {self.t_before:.3f} s ({self.missing} samples missing)"
 
 
 def imu_gaps(imu: ImuData, min_missing: int = 1) -> list[ImuGap]:
