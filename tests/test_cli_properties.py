@@ -195,34 +195,33 @@ def test_latitude_and_allan_commands(data, capsys):
         _check_cli(capsys, [*cmd, p], folder=d)
 
 
+def _run_with_one_mutated(data, capsys, files: dict, argv, out: str):
+    """Write the valid ``files`` ({name: text}) with one of them mutated, and run the command
+    ``argv(folder)`` whose output is ``folder/out``."""
+    which = data.draw(st.sampled_from(sorted(files)))
+    raw = data.draw(mutated(files[which]))
+    with tempfile.TemporaryDirectory() as d:
+        d = Path(d)
+        for name, text in files.items():
+            (d / name).write_text(text)
+        (d / which).write_bytes(raw)
+        _check_cli(capsys, argv(d), out=d / out, folder=d)
+
+
 @settings(max_examples=20, **SETTINGS)
 @given(data=st.data())
 def test_evaluate_command(data, capsys):
-    which = data.draw(st.sampled_from(["truth", "solution"]))
-    raw = data.draw(mutated(TRUTH))
-    with tempfile.TemporaryDirectory() as d:
-        t, s = Path(d) / "truth.csv", Path(d) / "sol.csv"
-        t.write_text(TRUTH)
-        s.write_text(TRUTH)
-        (t if which == "truth" else s).write_bytes(raw)
-        rep = Path(d) / "rep"
-        _check_cli(capsys, ["evaluate", "--truth", t, "--solution", s, "--report", rep],
-                   out=rep, folder=d)
+    _run_with_one_mutated(data, capsys, {"truth.csv": TRUTH, "sol.csv": TRUTH}, lambda d: [
+        "evaluate", "--truth", d / "truth.csv", "--solution", d / "sol.csv", "--report",
+        d / "rep"], "rep")
 
 
 @settings(max_examples=12, **SETTINGS)
 @given(data=st.data())
 def test_navigate_command(data, capsys):
-    which = data.draw(st.sampled_from(["imu", "gnss"]))
-    raw = data.draw(mutated(IMU_MOVING if which == "imu" else GNSS))
-    with tempfile.TemporaryDirectory() as d:
-        imu, gnss = Path(d) / "imu.csv", Path(d) / "gnss.csv"
-        imu.write_text(IMU_MOVING)
-        gnss.write_text(GNSS)
-        (imu if which == "imu" else gnss).write_bytes(raw)
-        out = Path(d) / "sol.csv"
-        _check_cli(capsys, ["navigate", "--imu", imu, "--gnss", gnss, "--out", out],
-                   out=out, folder=d)
+    _run_with_one_mutated(data, capsys, {"imu.csv": IMU_MOVING, "gnss.csv": GNSS}, lambda d: [
+        "navigate", "--imu", d / "imu.csv", "--gnss", d / "gnss.csv", "--out", d / "sol.csv"],
+        "sol.csv")
 
 
 @settings(max_examples=15, **SETTINGS)

@@ -170,16 +170,9 @@ def evaluate(truth, solution, *, roads=None) -> dict:
     ``truth`` and ``solution`` may be :class:`Trajectory`, :class:`Solution` or paths;
     ``roads`` a map path or road polylines for road-relative along/cross-track.
     """
-    def traj(x):
-        if isinstance(x, Solution):
-            return x.trajectory
-        if isinstance(x, Trajectory):
-            return x
-        return read_solution(x).trajectory
-
     if roads is not None and not isinstance(roads, list):
         roads = load_road_polylines(roads)
-    ev = _evaluate_trajectories(traj(truth), traj(solution), roads=roads)
+    ev = _evaluate_trajectories(as_trajectory(truth), as_trajectory(solution), roads=roads)
     return {**ev.metrics, "warnings": list(ev.warnings)}
 
 
@@ -232,20 +225,13 @@ def evaluate_report(truth, solution, *, roads=None, report=None, title: str | No
     ``figures``."""
     from selfnav.report import write_report
 
-    def traj(x):
-        if isinstance(x, Solution):
-            return x.trajectory
-        if isinstance(x, Trajectory):
-            return x
-        return read_solution(x).trajectory
-
     tn = truth_name or (str(truth) if not isinstance(truth, (Solution, Trajectory)) else "truth")
     sn = solution_name or (str(solution) if not isinstance(solution, (Solution, Trajectory))
                            else "solution")
     if roads is not None and not isinstance(roads, list):
         roads = load_road_polylines(roads)
-    ev = _evaluate_trajectories(traj(truth), traj(solution), roads=roads, truth_name=tn,
-                                solution_name=sn)
+    ev = _evaluate_trajectories(as_trajectory(truth), as_trajectory(solution), roads=roads,
+                                truth_name=tn, solution_name=sn)
     out = {"truth": tn, "solution": sn, **ev.metrics, "warnings": list(ev.warnings)}
     if report is not None:
         files = write_report(ev, report, roads=roads, sources={"truth": tn, "solution": sn},
@@ -303,8 +289,17 @@ def run_montecarlo(scenario: str, runs: int, *, out=None, **kw):
     return res
 
 
+def as_trajectory(x) -> Trajectory:
+    """A :class:`Trajectory` from a Trajectory, a :class:`Solution` or a solution/truth file."""
+    if isinstance(x, Solution):
+        return x.trajectory
+    if isinstance(x, Trajectory):
+        return x
+    return read_solution(x).trajectory
+
+
 __all__ = ["read_imu", "read_imu_positions", "read_gnss", "read_roads", "read_solution",
            "read_attitude", "estimate_latitude", "navigate", "match", "evaluate",
            "filter_config", "Solution", "allan_noise", "latitude_requirements", "latitude_error_budget",
            "evaluate_report", "map_coverage", "check_map_covers", "imu_gaps",
-           "simulate_files", "run_montecarlo"]
+           "simulate_files", "run_montecarlo", "as_trajectory"]

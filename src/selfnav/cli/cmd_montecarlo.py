@@ -23,7 +23,7 @@ def _parse_sets(items) -> dict:
 def register(app: typer.Typer) -> None:
     @app.command("montecarlo")
     def montecarlo_cmd(
-        scenario: Optional[str] = typer.Argument(None, help="Registered scenario (see --list), "
+        scenario: Optional[str] = typer.Argument(None, metavar="SCENARIO", help="Registered scenario (see --list), "
                                                  "e.g. static-latitude."),
         runs: opt.at_least(1, "--runs", help="Number of seeded runs.") = 100,
         workers: opt.Workers = 2,

@@ -34,9 +34,10 @@ def _magnetometer(imu, mag_path: Path | None):
     """Magnetometer columns from a separate CSV, interpolated onto the IMU times."""
     if mag_path is None:
         return imu
-    from selfnav.io.csvio import read_table
+    from selfnav.io.csvio import check_time, read_table
 
     tab = read_table(mag_path, ("t", "mx", "my", "mz"))
+    check_time(tab, min_rows=2)
     imu.mag_b = np.column_stack([np.interp(imu.t, tab["t"], tab[c]) for c in ("mx", "my", "mz")])
     return imu
 
@@ -60,7 +61,7 @@ def register(app: typer.Typer) -> None:
         out_datum: opt.OutDatum = "wgs84",
         grade: opt.Grade = "consumer",
         lever_arm: Annotated[str, typer.Option(
-            help="IMU-to-antenna lever arm, body RFU, m: x,y,z.")] = "0,0,0",
+            metavar="X,Y,Z", help="IMU-to-antenna lever arm, body RFU, m: x,y,z.")] = "0,0,0",
         imu_time_offset: Annotated[float, typer.Option(
             help="Added to the IMU time stamps, s.")] = 0.0,
         window_test: Annotated[bool, typer.Option(
@@ -78,14 +79,14 @@ def register(app: typer.Typer) -> None:
             help="Estimate the IMU's pitch and yaw to the vehicle (2 states, seen by the "
                  "NHC).")] = False,
         nhc_lever: Annotated[str, typer.Option(
-            help="IMU to the rear-axle centre (where the NHC holds), body RFU, m: "
+            metavar="X,Y,Z", help="IMU to the rear-axle centre (where the NHC holds), body RFU, m: "
                  "x,y,z.")] = "0,0,0",
         matcher: Annotated[str, opt.choice_option(
             "--matcher", choices=("seed", "mht"),
             help="--method seed identification: seed (residual minimisation, seed 004 §3) or "
                  "mht (road particles).")] = "seed",
         ins_datum: Annotated[str, opt.choice_option(
-            "--ins-datum", choices=opt.DATUMS, normalize=opt._datum_key,
+            "--ins-datum", choices=opt.DATUMS, normalize=opt.datum_key_lazy,
             help="--method seed: datum of the fast loop.")] = "sk42",
         declination_deg: Annotated[Optional[float], typer.Option(
             min=-180.0, max=180.0,

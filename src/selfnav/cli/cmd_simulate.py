@@ -16,7 +16,7 @@ def register(app: typer.Typer) -> None:
     @app.command("simulate")
     def simulate_cmd(
         scenario: Annotated[str, typer.Argument(
-            help="static, multiposition, ship, aircraft, car, or a TOML scenario file.")],
+            metavar="SCENARIO", help="static, multiposition, ship, aircraft, car, or a TOML scenario file.")],
         out: opt.out_folder("Folder for imu.csv, gnss.csv, gnss_errors.csv, truth.csv, "
                             "mag.csv and the map (car)."),
         seed: opt.Seed = 0,

@@ -49,7 +49,7 @@ def choice_option(*decls, choices, help: str, normalize=None, hidden: bool = Fal
                         callback=checked_choice(choices, normalize))
 
 
-def _datum_key(name: str) -> str:
+def datum_key_lazy(name: str) -> str:
     from selfnav.datum import datum_key  # lazily: only the commands that take a datum pay
 
     return datum_key(name)
@@ -78,10 +78,10 @@ GnssFormat = Annotated[str, choice_option(
     help="Format of the GNSS file; auto: by extension (.pos RTKLIB, .nmea/.nma/.gga NMEA, "
          "else CSV).")]
 GnssDatum = Annotated[str, choice_option(
-    "--gnss-datum", choices=DATUMS, normalize=_datum_key,
+    "--gnss-datum", choices=DATUMS, normalize=datum_key_lazy,
     help="Datum of the GNSS file's coordinates (converted to WGS-84 on reading).")]
 OutDatum = Annotated[str, choice_option(
-    "--out-datum", choices=DATUMS, normalize=_datum_key,
+    "--out-datum", choices=DATUMS, normalize=datum_key_lazy,
     help="Datum of the coordinates written.")]
 Grade = Annotated[str, choice_option(
     "--grade", choices=GRADES, help="IMU grade: its noise model (selfnav.sensors.GRADES).")]
@@ -109,14 +109,28 @@ def out_folder(what: str):
 
 
 # ---------------------------------------------------------------- numbers with a range
+def _in_range(what: str, lo: float, hi: float):
+    def check(value):
+        if value is not None and not lo <= value <= hi:
+            raise typer.BadParameter(f"{value:g} is not a {what} in degrees ({lo:g}..{hi:g})")
+        return value
+
+    return check
+
+
+#: Callbacks for options that take a latitude / longitude in degrees.
+check_latitude_deg = _in_range("latitude", -90.0, 90.0)
+check_longitude_deg = _in_range("longitude", -180.0, 360.0)
+
+
 def latitude_deg(*decls, help: str):
     """A latitude in degrees: -90 to 90."""
-    return Annotated[float, typer.Option(*decls, min=-90.0, max=90.0, help=help)]
+    return Annotated[float, typer.Option(*decls, callback=check_latitude_deg, help=help)]
 
 
 def longitude_deg(*decls, help: str):
     """A longitude in degrees: -180 to 360."""
-    return Annotated[float, typer.Option(*decls, min=-180.0, max=360.0, help=help)]
+    return Annotated[float, typer.Option(*decls, callback=check_longitude_deg, help=help)]
 
 
 def positive(*decls, help: str, optional: bool = False):
@@ -146,7 +160,7 @@ def at_least(minimum: int, *decls, help: str, optional: bool = False):
 Workers = at_least(0, "--workers", help="Local Dask workers (processes, one thread each); 0: "
                                         "in this process without Dask.")
 Scheduler = Annotated[Optional[str], typer.Option(
-    "--scheduler", help="Address of an existing Dask scheduler (tcp://host:8786); "
+    "--scheduler", metavar="ADDRESS", help="Address of an existing Dask scheduler (tcp://host:8786); "
                         "--workers is then ignored.")]
 Seed = Annotated[int, typer.Option("--seed", help="Random seed: the same seed gives the same "
                                                   "result.")]
