@@ -71,3 +71,12 @@ def test_gap_uses_the_longest_stretch_and_says_so(tmp_path, capsys):
     lines = err.strip().splitlines()
     assert len(lines) == 1 and "IMU gap" in lines[0] and "longest gap-free stretch" in lines[0]
     assert "a 3 h IMU gap at t = 150.000 s" in lines[0]
+
+
+def test_moving_record_is_not_taken_for_deg_per_s(shared_data, capsys):
+    """The real car drive is not at rest: one warning saying so, not a false units warning."""
+    imu = shared_data / "rtklibexplorer_drive_0708" / "imu_1934.csv"
+    code, out, err = run(["allan", imu, "--json"], capsys)
+    assert code == 0
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and "not at rest" in lines[0] and "deg/s" not in lines[0]

@@ -127,6 +127,13 @@ def register(app: typer.Typer) -> None:
                                mount_states=mount_states, scale_factors=scale_factors or None,
                                matcher=matcher, ins_datum=ins_datum,
                                declination_deg=declination_deg, progress=progress)
+        except np.linalg.LinAlgError as e:   # a safety net: one line, not a traceback
+            from selfnav.io.imu import MAX_BRIDGE_SAMPLES, imu_gaps
+
+            gaps = imu_gaps(data, MAX_BRIDGE_SAMPLES + 1)
+            cause = (f"; the likely cause is {max(gaps, key=lambda g: g.duration).describe()}"
+                     if gaps else "")
+            raise SelfnavError(f"{imu}: the filter failed numerically ({e}){cause}") from None
         finally:
             if bar is not None:
                 bar.stop()

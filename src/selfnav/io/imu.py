@@ -198,25 +198,47 @@ def rest_noise_density(x, dt: float) -> float:
     return float(np.median(np.std(np.diff(x, axis=0), axis=0)) / np.sqrt(2.0) * np.sqrt(dt))
 
 
-def check_rest_units(imu: ImuData, path=None) -> None:
-    """One-line warnings when a record at rest fits deg/s better than rad/s.
+#: RMS variation of |f| above which a record is not at rest, m/s² (a consumer MEMS at rest:
+#: ~0.02; a car on a road: ~0.6).
+MAX_REST_F_RMS = 0.2
 
-    At rest the gyros see the Earth rate (plus bias): a mean 30-90 × the Earth rate is the
-    Earth rate in deg/s, a mean beyond 3000 × (12.6 °/s) no gyro bias at rest; a white noise
-    above :data:`MAX_PLAUSIBLE_ARW_DEG_PER_SQRT_H` is a MEMS gyro's noise in deg/s.
+
+def check_rest_units(imu: ImuData, path=None) -> None:
+    """One-line warnings for a record meant to be at rest (``allan``, ``latitude``): one that
+    moves, and gyros that fit deg/s better than rad/s.
+
+    * ``|f|`` varying by more than :data:`MAX_REST_F_RMS` RMS: not at rest (the Allan
+      deviation of a moving record measures the motion);
+    * a mean rate beyond 3000 × the Earth rate (12.6 °/s): no gyro bias is that large, a MEMS
+      bias in deg/s is;
+    * a white noise above :data:`MAX_PLAUSIBLE_ARW_DEG_PER_SQRT_H`: a MEMS gyro's noise in
+      deg/s;
+    * a mean rate 45-70 × the Earth rate with a quiet gyro: the Earth rate in deg/s, if the gyro
+      is navigation or tactical grade (a MEMS bias can land there too: the message says so).
+
     (Accelerometers in g are refused by :func:`check_imu_units`.)
     """
     path = path or imu.source or "IMU data"
     if len(imu) < 3:
         return
+    fn = np.sqrt(np.einsum("ij,ij->i", imu.f_ib_b, imu.f_ib_b))
+    f_rms = float(np.std(fn))
+    if f_rms > MAX_REST_F_RMS:
+        warn(f"{path}: not at rest: |f| varies by {f_rms:.2g} m/s² RMS; an Allan or latitude "
+             "analysis of a moving record measures the motion, not the sensor")
+        return
     ratio = earth_rate_ratio(imu)
     arw = np.degrees(rest_noise_density(imu.omega_ib_b, imu.dt)) * 60.0
-    if 30.0 < ratio < 90.0 or ratio > 3000.0:
-        warn(f"{path}: the mean gyro rate at rest is {ratio:.4g} × the Earth rate: the gyros "
-             "look like deg/s, the file needs rad/s (or the unit was not at rest)")
+    if ratio > 3000.0:
+        warn(f"{path}: the mean gyro rate at rest is {ratio:.4g} × the Earth rate, more than "
+             "any gyro bias: the gyros look like deg/s, the file needs rad/s")
     elif arw > MAX_PLAUSIBLE_ARW_DEG_PER_SQRT_H:
         warn(f"{path}: gyro white noise {arw:.3g} °/√h is beyond any gyro's: the rates look "
              "like deg/s, the file needs rad/s")
+    elif 45.0 < ratio < 70.0:
+        warn(f"{path}: the mean gyro rate at rest is {ratio:.3g} × the Earth rate (57.3 × in "
+             "deg/s): if the gyros are navigation or tactical grade the file is in deg/s and "
+             "needs rad/s (a MEMS gyro's bias can also be that large)")
 
 
 def report_gaps(imu: ImuData, max_bridge_samples: int = MAX_BRIDGE_SAMPLES) -> ImuData:
