@@ -293,19 +293,136 @@ def evaluate(truth, solution, *, roads=None) -> dict:
     ``truth`` and ``solution`` may be :class:`Trajectory`, :class:`Solution` or paths;
     ``roads`` a map path or road polylines for road-relative along/cross-track.
     """
-    def traj(x):
-        if isinstance(x, Solution):
-            return x.trajectory
-        if isinstance(x, Trajectory):
-            return x
-        return read_solution(x).trajectory
-
     if roads is not None and not isinstance(roads, list):
         roads = load_road_polylines(roads)
-    ev = _evaluate_trajectories(traj(truth), traj(solution), roads=roads)
+    ev = _evaluate_trajectories(as_trajectory(truth), as_trajectory(solution), roads=roads)
     return {**ev.metrics, "warnings": list(ev.warnings)}
+
+
+# --------------------------------------------------------------------------------------------
+# The other commands' functions (issue 11: every command calls the API)
+# --------------------------------------------------------------------------------------------
+def allan_noise(imu: ImuData, *, plot=None, title: str | None = None) -> dict:
+    """Allan deviation and noise terms of an IMU record at rest: the keys of
+    ``selfnav allan --json`` (ARW, bias instability, VRW, ... per axis, DESIGN §6).
+
+    Records with gaps are analysed on their longest gap-free stretch (one warning says so).
+    ``plot``: a PNG file for the log-log plot (written only when given).
+    """
+    from selfnav import allan as allan_mod
+
+    res = allan_mod.analyze_imu(imu)
+    out = allan_mod.summary(res)
+    if plot is not None:
+        allan_mod.plot_allan(res, plot, title or f"Allan deviation: {imu.source or 'IMU'}")
+        out["plot"] = str(plot)
+    return out
+
+
+def latitude_requirements(lat_deg: float = 60.0, *, seed_constants: bool = False) -> list:
+    """Seed 000's sensor-requirements table at ``lat_deg``: one dict per row (Δφ in degrees
+    and arc-minutes, gyro drift °/h and accelerometer error g that each cause it)."""
+    from selfnav.latitude import SEED_TABLE_DPHI_DEG, requirements_table
+
+    if not -90.0 <= lat_deg <= 90.0:
+        raise SelfnavError(f"latitude {lat_deg:g}° is outside -90..90")
+    tab = requirements_table(SEED_TABLE_DPHI_DEG, lat_deg, seed_constants=seed_constants)
+    return [{k: float(v) for k, v in zip(tab, vals)} for vals in zip(*tab.values())]
+
+
+def latitude_error_budget(result: LatitudeResult, *, gyro_bias_deg_h: float = 0.005,
+                          accel_bias_ug: float = 50.0) -> dict:
+    """Latitude error, degrees, caused by each gyro (``gyro_bias_deg_h``) and accelerometer
+    (``accel_bias_ug``) bias alone, the noise, and their root sum square (seed 000 (4.3))."""
+    from selfnav.latitude import DEG_PER_H, G_STD, error_budget
+
+    b = error_budget(result, gyro_bias_deg_h * DEG_PER_H, accel_bias_ug * 1e-6 * G_STD)
+    return {k: float(np.degrees(v)) for k, v in b.items()}
+
+
+def evaluate_report(truth, solution, *, roads=None, report=None, title: str | None = None,
+                    truth_name: str | None = None, solution_name: str | None = None) -> dict:
+    """:func:`evaluate` and, with ``report`` (a folder), its plots, ``metrics.json`` and
+    ``report.html`` (written as one set). Returns the ``selfnav evaluate --json`` object:
+    the metrics (with ``coverage``), ``warnings`` and, with a report, ``report`` and
+    ``figures``."""
+    from selfnav.report import write_report
+
+    tn = truth_name or (str(truth) if not isinstance(truth, (Solution, Trajectory)) else "truth")
+    sn = solution_name or (str(solution) if not isinstance(solution, (Solution, Trajectory))
+                           else "solution")
+    if roads is not None and not isinstance(roads, list):
+        roads = load_road_polylines(roads)
+    ev = _evaluate_trajectories(as_trajectory(truth), as_trajectory(solution), roads=roads,
+                                truth_name=tn, solution_name=sn)
+    out = {"truth": tn, "solution": sn, **ev.metrics, "warnings": list(ev.warnings)}
+    if report is not None:
+        files = write_report(ev, report, roads=roads, sources={"truth": tn, "solution": sn},
+                             title=title or f"selfnav evaluate: {sn} against {tn}")
+        out["report"] = files["report.html"]
+        out["figures"] = [files["errors.png"], files["track.png"]]
+    return out
+
+
+def map_coverage(roads, lat, lon, *, margin_m: float = 1000.0) -> float:
+    """Share of the points (rad) within ``margin_m`` of the map's extent
+    (:func:`selfnav.roads.graph.map_coverage`)."""
+    from selfnav.roads.graph import map_coverage as _coverage
+
+    return _coverage(_as_roads(roads), lat, lon, margin_m=margin_m)
+
+
+def check_map_covers(roads, lat, lon, *, what: str = "the data", margin_m: float = 1000.0):
+    """Refuse (one line) a map none of the points lies on, and warn when part of them lie off
+    it: the check ``selfnav match`` and ``selfnav navigate --map`` make before the work."""
+    from selfnav.roads.graph import check_map_covers as _check
+
+    graph = _as_roads(roads)
+    _check(graph, lat, lon, what=what, margin_m=margin_m)
+    return graph
+
+
+def imu_gaps(imu: ImuData, min_missing: int = 1) -> list:
+    """Gaps of an IMU record (:func:`selfnav.io.imu.imu_gaps`)."""
+    from selfnav.io.imu import imu_gaps as _gaps
+
+    return _gaps(imu, min_missing)
+
+
+def simulate_files(spec, out_dir, *, seed: int = 0, grade: str | None = None,
+                   duration: float | None = None, dt: float | None = None, progress=None):
+    """Simulate a scenario (:func:`selfnav.simulate.scenarios.simulate`) and write its files
+    into the folder ``out_dir`` as one set; returns ``(simulation, paths)``."""
+    from selfnav.simulate.scenarios import simulate, write_simulation
+
+    sim = simulate(spec, seed=seed, grade=grade, duration=duration, dt=dt, progress=progress)
+    if progress is not None:
+        progress("writing")
+    return sim, write_simulation(sim, out_dir)
+
+
+def run_montecarlo(scenario: str, runs: int, *, out=None, **kw):
+    """A seeded Monte Carlo campaign (:func:`selfnav.montecarlo.run_montecarlo`, same keywords);
+    with ``out`` (``.csv`` or ``.parquet``) the per-run rows are written too."""
+    from selfnav import montecarlo as mc
+
+    res = mc.run_montecarlo(scenario, runs, **kw)
+    if out is not None:
+        mc.write_results(out, res)
+    return res
+
+
+def as_trajectory(x) -> Trajectory:
+    """A :class:`Trajectory` from a Trajectory, a :class:`Solution` or a solution/truth file."""
+    if isinstance(x, Solution):
+        return x.trajectory
+    if isinstance(x, Trajectory):
+        return x
+    return read_solution(x).trajectory
 
 
 __all__ = ["read_imu", "read_imu_positions", "read_gnss", "read_roads", "read_solution",
            "read_attitude", "estimate_latitude", "navigate", "match", "evaluate",
-           "filter_config", "initial_state", "write_fix_log", "Solution"]
+           "filter_config", "initial_state", "write_fix_log", "Solution", "allan_noise",
+           "latitude_requirements", "latitude_error_budget", "evaluate_report", "map_coverage",
+           "check_map_covers", "imu_gaps", "simulate_files", "run_montecarlo", "as_trajectory"]

@@ -29,13 +29,16 @@ from __future__ import annotations
 
 import logging
 import os
+import signal
+import threading
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
 
 import numpy as np
 
-from selfnav.errors import SelfnavError
+from selfnav.errors import SelfnavError, check_interrupt
 
 
 # ------------------------------------------------------------------------------------------------
@@ -180,9 +183,11 @@ register_pair("static-latitude", run_static_latitude, unit="deg",
 def run_chunk(run: Callable, indices, seeds, params: dict) -> list[dict]:
     """Run a batch of seeds (one Dask task). Each row gets ``run`` (index) and ``seed``."""
     rows = []
-    for i, s in zip(indices, seeds):
-        r = run(int(s), params)
-        rows.append({"run": int(i), "seed": int(s), **r})
+    with warnings.catch_warnings():  # a run's notes are not the user's: the summary speaks
+        warnings.simplefilter("ignore")
+        for i, s in zip(indices, seeds):
+            r = run(int(s), params)
+            rows.append({"run": int(i), "seed": int(s), **r})
     return rows
 
 
@@ -251,6 +256,26 @@ def _to_table(rows: list[dict]) -> dict:
     return {k: np.array([r[k] for r in rows]) for k in keys}
 
 
+def _results_as_completed(futures, poll_s: float = 0.05):
+    """Results of Dask futures as they finish, polling so that the main thread stays responsive
+    to Ctrl-C (a signal the kernel hands to one of Dask's threads would not wake a blocking
+    wait: the process hung until the next future finished)."""
+    import time
+
+    pending = list(futures)
+    while pending:
+        check_interrupt()
+        still = []
+        for f in pending:
+            if f.done():
+                yield f.result()
+            else:
+                still.append(f)
+        pending = still
+        if pending:
+            time.sleep(poll_s)
+
+
 def _make_client(workers: int, scheduler: str | None):
     from dask.distributed import Client
 
@@ -278,12 +303,31 @@ def local_cluster(workers: int):
     key = "MALLOC_TRIM_THRESHOLD_"
     saved = os.environ.pop(key, None)  # a nanny of an earlier cluster may have exported it
     try:
-        with dask.config.set({f"distributed.nanny.pre-spawn-environ.{key}": None}):
+        _start_forkserver_ignoring_sigint()
+        with dask.config.set({f"distributed.nanny.pre-spawn-environ.{key}": None,
+                              "distributed.worker.multiprocessing-method": "forkserver"}):
             return LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                                dashboard_address=None, silence_logs=logging.ERROR)
+                                dashboard_address=None, silence_logs=logging.CRITICAL)
     finally:
         if saved is not None:
             os.environ[key] = saved
+
+
+def _start_forkserver_ignoring_sigint() -> None:
+    """Start multiprocessing's fork server with SIGINT ignored; the worker processes it forks
+    inherit that, so Ctrl-C reaches this process only, which then shuts the cluster down (no
+    traceback from every worker). Only the fork and exec of the server (milliseconds) run with
+    SIGINT ignored here: a Ctrl-C during the cluster's start-up is not lost."""
+    import multiprocessing.forkserver as fs
+
+    if threading.current_thread() is not threading.main_thread():
+        fs.ensure_running()
+        return
+    old = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        fs.ensure_running()
+    finally:
+        signal.signal(signal.SIGINT, old)
 
 
 def run_montecarlo(name: str, runs: int, *, seed: int = 0, params: dict | None = None,
@@ -333,7 +377,7 @@ def run_montecarlo(name: str, runs: int, *, seed: int = 0, params: dict | None =
                 progress(len(idx))
     else:
         try:
-            from dask.distributed import as_completed
+            import dask.distributed  # noqa: F401
         except ImportError:
             raise SelfnavError("Dask is not installed: pip install 'selfnav[dask]', or run in "
                                "this process with --workers 0") from None
@@ -348,8 +392,7 @@ def run_montecarlo(name: str, runs: int, *, seed: int = 0, params: dict | None =
             size = chunk_size or default_chunk_size(runs, nw)
             futs = [client.submit(run_chunk, pair.run, idx, seeds[idx], p, pure=False)
                     for idx in _chunks(runs, size)]
-            for fut in as_completed(futs):
-                part = fut.result()
+            for part in _results_as_completed(futs):
                 rows += part
                 if progress:
                     progress(len(part))

@@ -631,7 +631,9 @@ def plot_seed_fig3(path, *, gain=50.0, t_end=8.0, dt=1e-3):
     axes[0].legend(fontsize=7, ncol=2, loc="lower left")
     axes[1].set_xlabel("t, s (simulated; printed form leaves the plot when it diverges)")
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    from selfnav.io.output import write_figure
+
+    write_figure(fig, path, dpi=110)
     plt.close(fig)
     return path
 

