@@ -352,3 +352,205 @@ def test_different_rates(imu_step, att_step, att_shift):
     e = np.degrees(sol.lat - np.interp(sol.t, tr.t, tr.lat))
     assert np.sqrt(np.mean(e[ok] ** 2)) < 0.005
     assert abs(np.degrees(sol.lon[-1] - np.interp(sol.t[-1], tr.t, tr.lon))) < 0.005
+
+
+# ----------------------------------------------------------------------------- simulate -> moving (CLI)
+SHIP_TOML = """[scenario]
+kind = "ship"
+duration = {duration}
+dt = 0.01
+lat_deg = {lat}
+lon_deg = {lon}
+truth_hz = 0
+[motion]
+course_deg = {course}
+[imu]
+grade = "perfect"
+[gnss]
+enabled = false
+[mag]
+enabled = false
+"""
+HEMISPHERES = {"N": (45.0, 30.0, 30.0), "S": (-38.0, 150.0, -140.0)}
+
+
+def _simulate_ship(d, hemi, duration, seed):
+    lat, lon, course = HEMISPHERES[hemi]
+    d.mkdir(parents=True, exist_ok=True)
+    toml = d / "ship.toml"
+    toml.write_text(SHIP_TOML.format(duration=duration, lat=lat, lon=lon, course=course))
+    assert main(["simulate", str(toml), "--out", str(d), "--seed", str(seed), "--json"]) == 0
+    return d
+
+
+def _attitude_file(d, offset, name):
+    """The truth's attitude stamped ``offset`` s late (negative: early)."""
+    from selfnav.io.trajectory import read_truth
+
+    tr = read_truth(d / "truth.csv")
+    r, p, h = att.euler_from_dcm_nb(tr.C_nb)
+    path = d / name
+    write_csv(path, dict(t=tr.t + offset, roll_deg=np.degrees(r), pitch_deg=np.degrees(p),
+                         heading_deg=np.degrees(h)), comments=["simulated attitude"], fmt="%.12g")
+    return path
+
+
+def _instantaneous_imu(d):
+    """The same motion's gyro rates sampled at the IMU times (point samples, not interval means)."""
+    from selfnav.io.readers import read_imu
+    from selfnav.io.trajectory import read_truth
+    from selfnav.simulate.inverse import TrajectorySpline
+
+    imu = read_imu(d / "imu.csv")
+    w = TrajectorySpline(read_truth(d / "truth.csv")).kinematics(imu.t)["omega_ib_b"]
+    path = d / "imu_inst.csv"
+    write_csv(path, dict(t=imu.t, wx=w[:, 0], wy=w[:, 1], wz=w[:, 2], fx=imu.f_ib_b[:, 0],
+                         fy=imu.f_ib_b[:, 1], fz=imu.f_ib_b[:, 2]),
+              comments=["simulated, instantaneous rates"], fmt={"t": "%.6f"})
+    return path
+
+
+def _run_moving(capsys, d, imu, attf, out_name, *extra):
+    import json
+
+    from selfnav.io.trajectory import read_truth
+
+    lat, lon, _ = HEMISPHERES["N" if "N" in d.name else "S"]
+    out = d / out_name
+    capsys.readouterr()   # drop what earlier commands printed (the fixture's simulate)
+    rc = main(["moving", "--imu", str(imu), "--attitude", str(attf), "--lat0-deg", str(lat),
+               "--lon0-deg", str(lon), "--out", str(out), "--json", *extra])
+    assert rc == 0
+    js = json.loads(capsys.readouterr().out)
+    tr = read_truth(d / "truth.csv")
+    sol = np.loadtxt(out, delimiter=",", comments="#", skiprows=6)
+    t = sol[:, 0]
+    e_lat = sol[:, 1] - np.degrees(np.interp(t, tr.t, tr.lat))
+    e_lon = (sol[:, 2] - np.degrees(np.interp(t, tr.t, np.unwrap(tr.lon))) + 180.0) % 360.0 - 180.0
+    return js, float(np.sqrt(np.mean(e_lat**2))), float(e_lon[-1]), sol
+
+
+@pytest.fixture(scope="module")
+def sim_ships(tmp_path_factory):
+    """10-minute simulated ships (perfect IMU, 100 Hz truth attitude) in both hemispheres."""
+    out = {}
+    for hemi, seed in (("N", 3), ("S", 11)):
+        d = _simulate_ship(tmp_path_factory.mktemp(f"ship{hemi}"), hemi, 600.0, seed)
+        out[hemi] = d
+    return out
+
+
+@pytest.mark.parametrize("hemi", ["N", "S"])
+@pytest.mark.parametrize("offset,rates", [(0.0, "interval-mean"), (0.05, "interval-mean"),
+                                          (-0.05, "interval-mean"), (0.05, "instantaneous"),
+                                          (-0.05, "instantaneous")])
+def test_simulate_then_moving_cli(sim_ships, capsys, hemi, offset, rates):
+    """simulate -> moving end to end: interval-mean rows (the simulator's) with default options,
+    instantaneous rows with --imu-rates instantaneous; attitude late or early by 50 ms."""
+    d = sim_ships[hemi]
+    attf = _attitude_file(d, offset, f"att_{offset:+.3f}.csv")
+    if rates == "interval-mean":
+        imu, extra = d / "imu.csv", []
+    else:
+        imu = d / "imu_inst.csv"
+        if not imu.exists():
+            _instantaneous_imu(d)
+        extra = ["--imu-rates", "instantaneous"]
+    js, lat_rms, lon_end, _ = _run_moving(capsys, d, imu, attf, "sol.csv", *extra)
+    assert js["imu_rates"] == rates and js["attitude_time_offset_estimated"] is True
+    assert abs(js["attitude_time_offset_s"] - offset) < 1e-4          # found to 0.1 ms
+    assert lat_rms < 0.005 and abs(lon_end) < 0.005
+    assert js["lat_error_per_ms_deg"] > 0.05                          # a rolling ship: ~0.1°/ms
+
+
+@pytest.mark.parametrize("method", ["discrete", "euler"])
+def test_simulate_then_moving_methods(sim_ships, capsys, method):
+    d = sim_ships["S"]
+    attf = _attitude_file(d, 0.02, "att_m.csv")
+    js, lat_rms, lon_end, _ = _run_moving(capsys, d, d / "imu.csv", attf, "sol_m.csv",
+                                          "--method", method)
+    assert abs(js["attitude_time_offset_s"] - 0.02) < 1e-4
+    assert lat_rms < 0.005 and abs(lon_end) < 0.005
+
+
+def test_instantaneous_rows_read_as_interval_means(sim_ships, capsys):
+    """Point-sampled rates read with the default convention: a sample at t is taken as the mean
+    over [t − dt, t], i.e. as the rate dt/2 earlier, so the estimated offset takes up +dt/2
+    (+5 ms: the attitude looks late) and the latitude stays within the target."""
+    d = sim_ships["N"]
+    imu = d / "imu_inst.csv"
+    if not imu.exists():
+        _instantaneous_imu(d)
+    attf = _attitude_file(d, 0.0, "att_0.csv")
+    js, lat_rms, lon_end, _ = _run_moving(capsys, d, imu, attf, "sol_i.csv")
+    assert js["attitude_time_offset_s"] == pytest.approx(0.005, abs=2e-4)
+    assert lat_rms < 0.005 and abs(lon_end) < 0.005
+
+
+def test_fixed_offset_and_timing_sensitivity(sim_ships, capsys):
+    """--attitude-time-offset is used as given; 1 ms wrong moves the latitude by the reported
+    sensitivity, a warning names the further offset and the σ covers the error."""
+    d = sim_ships["N"]
+    attf = _attitude_file(d, 0.03, "att_f.csv")
+    js0, lat_rms0, _, sol0 = _run_moving(capsys, d, d / "imu.csv", attf, "sol_f0.csv",
+                                         "--attitude-time-offset", "0.03")
+    assert js0["attitude_time_offset_estimated"] is False and js0["attitude_time_offset_s"] == 0.03
+    assert lat_rms0 < 0.005 and not js0["warnings"]
+    js1, lat_rms1, _, sol1 = _run_moving(capsys, d, d / "imu.csv", attf, "sol_f1.csv",
+                                         "--attitude-time-offset", "0.031")
+    t, i0, i1 = np.intersect1d(sol0[:, 0], sol1[:, 0], return_indices=True)
+    sol0, sol1 = sol0[i0], sol1[i1]
+    ok = t > t[0] + js0["transient_s"]
+    diff = sol1[ok, 1] - sol0[ok, 1]
+    assert np.sqrt(np.mean(diff**2)) == pytest.approx(js0["lat_error_per_ms_deg"], rel=0.1)
+    assert js1["attitude_time_offset_check_s"] == pytest.approx(-1e-3, abs=2e-5)
+    assert any("further attitude time offset of -1.000 ms" in w for w in js1["warnings"])
+    z = diff / sol1[ok, 3]
+    assert 0.5 < np.sqrt(np.mean(z**2)) < 1.5
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("hemi", ["N", "S"])
+def test_acceptance_30min_ship_cli(tmp_path, capsys, hemi):
+    """Issue 13 acceptance: 30-min ships, simulator output (interval means), perfect IMU, 100 Hz
+    attitude late/early by up to 50 ms, default options."""
+    d = _simulate_ship(tmp_path / f"ship{hemi}", hemi, 1800.0, 5 if hemi == "N" else 6)
+    for offset in (0.0, 0.05, -0.05, 0.0173):
+        js, lat_rms, lon_end, _ = _run_moving(capsys, d, d / "imu.csv",
+                                              _attitude_file(d, offset, "att.csv"), "sol.csv")
+        assert lat_rms <= 0.005 and abs(lon_end) <= 0.005, (offset, lat_rms, lon_end)
+        assert abs(js["attitude_time_offset_s"] - offset) <= 1e-4
+
+
+def test_sigma_is_honest_monte_carlo():
+    """Navigation-grade gyros (sensors.GRADES' own error model) and attitude source, random
+    offsets in ±50 ms, both row conventions: RMS(error/σ) of latitude within 0.7–1.5."""
+    from selfnav import sensors
+    from selfnav.simulate.inverse import TrajectorySpline, imu_from_trajectory
+    from selfnav.types import AttitudeData, ImuData
+
+    rng = np.random.default_rng(13)
+    g = mb.grade_errors("navigation")
+    model = sensors.imu_grade("navigation")
+    z, zl = [], []
+    for hemi, (lat, lon, course) in HEMISPHERES.items():
+        tr = ship_trajectory(900.0, 0.05, np.radians(lat), np.radians(lon), course_deg=course, seed=7)
+        imu, truth = imu_from_trajectory(tr, 0.05, return_truth=True)
+        inst = TrajectorySpline(tr).kinematics(imu.t)["omega_ib_b"]
+        for i in range(6):
+            rates = mv.RATE_CONVENTIONS[i % 2]
+            w, _ = model.apply(imu.t, imu.omega_ib_b if i % 2 == 0 else inst, imu.f_ib_b, rng)
+            eps = (rng.normal(0.0, g["attitude_noise"], (len(truth.t), 3))
+                   + np.outer(truth.t, rng.normal(0.0, g["attitude_rate"], 3)))
+            C_nb = np.swapaxes(att.rotvec_to_dcm(eps) @ np.swapaxes(truth.C_nb, -1, -2), -1, -2)
+            off = rng.uniform(-0.05, 0.05)
+            sol = navigate_moving(ImuData(imu.t, w, imu.f_ib_b), AttitudeData(truth.t + off, C_nb),
+                                  truth.lat[0], truth.lon[0], rates=rates)
+            assert abs(sol.info["attitude_time_offset_s"] - off) < 1e-4
+            ok = np.flatnonzero(sol.t > 5.0 / sol.gain)[::100]
+            z.append((sol.lat[ok] - np.interp(sol.t[ok], truth.t, truth.lat)) / sol.sigma_lat[ok])
+            el = sol.lon[-1] - np.interp(sol.t[-1], truth.t, np.unwrap(truth.lon))
+            zl.append(el / sol.sigma_lon[-1])
+    r = np.sqrt(np.mean(np.concatenate(z) ** 2))
+    assert 0.7 < r < 1.5, r
+    assert np.sqrt(np.mean(np.square(zl))) < 2.0

@@ -516,12 +516,21 @@ class MovingBaseNavigator:
         terms = {k: s[k] for k in BUDGET_KEYS}
         h = float(np.median(dt))
         sig_w = error_budget(gain=self.gain, dt=h, smooth=self.smooth, **terms)["rate_total"]
-        # start: both stages begin at the mean of the raw ω_n over 1/K, whose error (about the
-        # one-stage σ) decays as e^{−Kτ}
-        sig_w0 = error_budget(gain=self.gain, dt=h, smooth=False, **terms)["rate_total"]
-        s_lat = np.hypot(sig_w, np.exp(-self.gain * tau) * sig_w0) / A
+        # start: the filters begin at the mean of the raw ω_n over 1/K, whose error is √2 × the
+        # one-stage σ (the white parts averaged over 1/K); it decays as (1 + Kτ) e^{−Kτ} (two
+        # stages) or e^{−Kτ}, and its integral stays in the longitude
+        K = self.gain
+        sig_w0 = np.sqrt(2.0) * error_budget(gain=K, dt=h, smooth=False, **terms)["rate_total"]
+        if self.smooth:
+            decay = (1.0 + K * tau) * np.exp(-K * tau)
+            lon0 = (2.0 - (2.0 + K * tau) * np.exp(-K * tau)) / K
+        else:
+            decay = np.exp(-K * tau)
+            lon0 = (1.0 - np.exp(-K * tau)) / K
+        s_lat = np.hypot(sig_w, decay * sig_w0) / A
         rate_bias = np.hypot(s["gyro_bias"], s["attitude_rate"])
-        s_lon = np.sqrt((rate_bias * tau) ** 2 + s["arw"] ** 2 * tau + s["attitude_noise"] ** 2)
+        s_lon = np.sqrt((rate_bias * tau) ** 2 + s["arw"] ** 2 * tau + s["attitude_noise"] ** 2
+                        + (sig_w0 * lon0) ** 2)
         return s_lat, s_lon
 
     # -- streaming

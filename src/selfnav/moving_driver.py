@@ -223,9 +223,11 @@ def timing_sensitivity(t, C_nb, body_rates, sol: MovingSolution, *, smooth=True)
     t = np.asarray(t, float)
     u = np.einsum("nji,nj->ni", np.asarray(C_nb, float), np.asarray(body_rates, float))
     d = -np.diff(u, axis=0) / np.diff(t)[:, None]
-    g = low_pass(sol.t, d, sol.gain, np.zeros(3))
+    # the filters start at the mean over the first 1/K, as the navigator's (its start transient)
+    d0 = d[:max(1, int(np.searchsorted(sol.t, sol.t[0] + 1.0 / sol.gain)))].mean(axis=0)
+    g = low_pass(sol.t, d, sol.gain, d0)
     if smooth:
-        g = low_pass(sol.t, g, sol.gain, np.zeros(3))
+        g = low_pass(sol.t, g, sol.gain, d0)
     c, s = np.cos(sol.lat), np.sin(sol.lat)
     A = sol.branch * np.maximum(np.hypot(sol.omega_n[:, 1], sol.omega_n[:, 2]), 1e-12)
     lead = (2.0 if smooth else 1.0) / sol.gain
