@@ -11,6 +11,7 @@ estimated (default) or, with ``--fixed-error-ms E``, fixed by hand with an error
     python experiments/moving_monte_carlo.py                       # navigation grade, 40 runs
     python experiments/moving_monte_carlo.py --grade tactical --runs 20
     python experiments/moving_monte_carlo.py --fixed-error-ms 2
+    python experiments/moving_monte_carlo.py --grade-gain            # K of grade_table
 
 Prints per run the latitude RMS error, the RMS of error/σ (after 5/K) and the offset error, then
 the ensemble RMS(error/σ) for latitude and final longitude (target 0.7–1.5).
@@ -40,7 +41,7 @@ def make_track(lat_deg, course_deg, duration, dt, seed):
     return imu, inst, truth
 
 
-def one_run(imu, inst, truth, *, grade, rates, offset, rng, fixed_error=None):
+def one_run(imu, inst, truth, *, grade, rates, offset, rng, fixed_error=None, gain=None):
     """One noisy run; returns a dict of errors and σ (rad, s)."""
     model = sensors.imu_grade(grade)
     w_true = imu.omega_ib_b if rates == "interval-mean" else inst
@@ -54,7 +55,7 @@ def one_run(imu, inst, truth, *, grade, rates, offset, rng, fixed_error=None):
     data = ImuData(imu.t, w, imu.f_ib_b, source="simulated")
     given = None if fixed_error is None else offset + fixed_error
     sol = navigate_moving(data, A, truth.lat[0], truth.lon[0], rates=rates, grade=grade,
-                          attitude_time_offset=given)
+                          attitude_time_offset=given, gain=gain)
     lat = np.interp(sol.t, truth.t, truth.lat)
     lon = np.interp(sol.t, truth.t, np.unwrap(truth.lon))
     e = sol.lat - lat
@@ -76,7 +77,14 @@ def main() -> None:
     ap.add_argument("--max-offset-ms", type=float, default=50.0)
     ap.add_argument("--fixed-error-ms", type=float, default=None)
     ap.add_argument("--seed", type=int, default=2026)
+    ap.add_argument("--grade-gain", action="store_true",
+                    help="use the gain grade_table picks for the grade (default: B = 0.01 Hz)")
     a = ap.parse_args()
+    gain = None
+    if a.grade_gain:
+        from selfnav.moving_budget import grade_table
+
+        gain = {r["grade"]: r for r in grade_table(a.dt)}[a.grade]["gain_per_s"]
     rng = np.random.default_rng(a.seed)
     tracks = [make_track(45.0, 30.0, a.duration, a.dt, 1), make_track(-38.0, -140.0, a.duration, a.dt, 2)]
     z_lat, z_lon, rows = [], [], []
@@ -86,7 +94,8 @@ def main() -> None:
         rates = ("interval-mean", "instantaneous")[(i // 2) % 2]
         off = rng.uniform(-a.max_offset_ms, a.max_offset_ms) * 1e-3
         fe = None if a.fixed_error_ms is None else rng.uniform(-1, 1) * a.fixed_error_ms * 1e-3
-        r = one_run(imu, inst, truth, grade=a.grade, rates=rates, offset=off, rng=rng, fixed_error=fe)
+        r = one_run(imu, inst, truth, grade=a.grade, rates=rates, offset=off, rng=rng, fixed_error=fe,
+                    gain=gain)
         z_lat.append(r["z_lat"])
         z_lon.append(r["z_lon"])
         rows.append(r)
@@ -95,10 +104,12 @@ def main() -> None:
               f"RMS(e/σ) {np.sqrt(np.mean(r['z_lat'] ** 2)):.2f}  lon end {np.degrees(r['lon_err']):+.4f}° "
               f"(e/σ {r['z_lon']:+.2f})", flush=True)
     zl = np.concatenate(z_lat)
-    print(f"\n{a.runs} runs, grade {a.grade}, {a.duration:g} s at {1 / a.dt:g} Hz, offsets ±{a.max_offset_ms:g} ms"
+    print(f"\n{a.runs} runs, grade {a.grade}, K = {gain or 2 * np.pi * 0.01:.4g}, "
+          f"{a.duration:g} s at {1 / a.dt:g} Hz, offsets ±{a.max_offset_ms:g} ms"
           + ("" if a.fixed_error_ms is None else f", fixed by hand with error ±{a.fixed_error_ms:g} ms")
           + f" ({time.perf_counter() - t0:.0f} s)")
     print(f"latitude: RMS error {np.degrees(np.sqrt(np.mean([r['lat_rms'] ** 2 for r in rows]))):.4f}°, "
+          f"mean σ at the end {np.degrees(np.mean([r['sigma_lat_end'] for r in rows])):.4f}°, "
           f"RMS(error/σ) {np.sqrt(np.mean(zl ** 2)):.2f}")
     print(f"final longitude: RMS(error/σ) {np.sqrt(np.mean(np.square(z_lon))):.2f}")
     print(f"offset error: RMS {1e3 * np.sqrt(np.mean([r['offset_err'] ** 2 for r in rows])):.2e} ms, "

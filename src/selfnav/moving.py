@@ -494,6 +494,9 @@ class MovingBaseNavigator:
         lon_rate = longitude_rate(w, branch)
         t_all = np.r_[t[0], t_out]
         lon = integrate_longitude(t_all, np.r_[lon_rate[0], lon_rate], self.lon0)[1:]
+        # the same lag in λ̇: λ(t) ≈ λ0 + ∫λ̇_f + L (λ̇_f(t) − λ̇_f(t_0)) (exact for a steadily
+        # changing λ̇, the filters started at the mean over 1/K as here)
+        lon = lon + self.lead * (lon_rate - lon_rate[0])
         lon = (lon + np.pi) % (2 * np.pi) - np.pi
         s_lat, s_lon = self.sigmas(t_out - t[0], w, dt)
         warn = []
@@ -527,10 +530,13 @@ class MovingBaseNavigator:
         else:
             decay = np.exp(-K * tau)
             lon0 = (1.0 - np.exp(-K * tau)) / K
-        s_lat = np.hypot(sig_w, decay * sig_w0) / A
+        s_lat = np.minimum(np.hypot(sig_w, decay * sig_w0) / A, np.pi / 2)   # 90°: no information
         rate_bias = np.hypot(s["gyro_bias"], s["attitude_rate"])
+        # the lag compensation L λ̇_f carries the filtered white noise
+        white = error_budget(gain=K, dt=h, smooth=self.smooth,
+                             **dict(terms, gyro_bias=0.0, attitude_rate=0.0))["rate_total"]
         s_lon = np.sqrt((rate_bias * tau) ** 2 + s["arw"] ** 2 * tau + s["attitude_noise"] ** 2
-                        + (sig_w0 * lon0) ** 2)
+                        + (sig_w0 * lon0) ** 2 + (self.lead * white) ** 2)
         return s_lat, s_lon
 
     # -- streaming
@@ -555,8 +561,10 @@ class MovingBaseNavigator:
         lat, s = latitude_track(w[None], st["lat"])
         lr = longitude_rate(w, s[0])
         st["lon"] += 0.5 * dt * (lr + st["lon_rate"]) if st["lon_rate"] is not None else dt * lr
+        if st["lon_rate"] is None:
+            st["lon_rate0"] = lr
         st["lon_rate"], st["lat"] = lr, float(lat[0])
-        return st["lat"] - self.lead * w[0], st["lon"]
+        return st["lat"] - self.lead * w[0], st["lon"] + self.lead * (lr - st["lon_rate0"])
 
     def start(self, C_nb0):
         """Initialise streaming from the first attitude ``C_n^b`` (streaming always runs the

@@ -93,7 +93,8 @@ def grade_table(dt=0.01, grades=None, hours=1.0) -> list:
 
     The bias floor ``√(b² + r²)/Ω`` cannot be averaged away; the gain at which the filtered
     noise equals it sets the time constant 1/K (equivalent averaging time 4/K). Verdict: usable
-    below 0.1°, marginal below 1°, otherwise not usable.
+    below 0.1°, marginal below 1°, otherwise not usable. Latitude figures are capped at 90° and
+    longitude at 180° (no information).
     """
     rows = []
     if grades is None:
@@ -103,12 +104,12 @@ def grade_table(dt=0.01, grades=None, hours=1.0) -> list:
         K = _noise_gain(g, dt, floor_rate)
         floor = floor_rate / OMEGA_EARTH
         sig = error_budget(gain=K, dt=dt, **{k: g[k] for k in BUDGET_KEYS})["lat_total"]
-        deg = np.degrees(sig)
+        deg = min(float(np.degrees(sig)), 90.0)   # 90°: no information (drift ≳ Ω)
         rows.append({"grade": name, "gyro_bias_deg_h": g["gyro_bias"] / DEG_PER_H,
                      "arw_deg_rth": g["arw"] / DEG_PER_SQRT_H, "attitude_noise_deg": g["attitude_noise"] / DEG,
                      "attitude_rate_deg_h": g["attitude_rate"] / DEG_PER_H,
-                     "lat_floor_deg": float(np.degrees(floor)), "gain_per_s": K,
+                     "lat_floor_deg": min(float(np.degrees(floor)), 90.0), "gain_per_s": K,
                      "time_constant_s": 1.0 / K, "lat_sigma_deg": float(deg),
-                     "lon_error_deg": float(np.degrees(floor_rate * hours * 3600.0)),
+                     "lon_error_deg": min(float(np.degrees(floor_rate * hours * 3600.0)), 180.0),
                      "verdict": "usable" if deg < 0.1 else ("marginal" if deg < 1.0 else "not usable")})
     return rows

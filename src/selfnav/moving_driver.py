@@ -19,7 +19,7 @@ term of the actual motion.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numba
 import numpy as np
@@ -234,6 +234,7 @@ def timing_sensitivity(t, C_nb, body_rates, sol: MovingSolution, *, smooth=True)
     dlat = (c * g[:, 2] - s * g[:, 1]) / A - lead * g[:, 0]
     rate = sol.branch * (c * g[:, 1] + s * g[:, 2])
     dlon = np.r_[0.0, np.cumsum(0.5 * np.diff(sol.t) * (rate[1:] + rate[:-1]))]
+    dlon = dlon + lead * (rate - rate[0])
     return dlat, dlon
 
 
@@ -275,6 +276,18 @@ def internal_attitude(t, dtheta_b, C_nb0, lat_assumed, velocity_n=None, h=0.0):
 
 
 # ----------------------------------------------------------------------------- driver
+def _with_start_row(sol: MovingSolution, t0, lon0) -> MovingSolution:
+    def first(x):
+        x = np.asarray(x)
+        return np.concatenate([x[:1], x]) if x.ndim and len(x) == len(sol.t) else x
+
+    lon = np.r_[(lon0 + np.pi) % (2 * np.pi) - np.pi, sol.lon]
+    return replace(sol, t=np.r_[t0, sol.t], lat=first(sol.lat), lon=lon,
+                   omega_n=first(sol.omega_n), sigma_lat=first(sol.sigma_lat),
+                   sigma_lon=np.r_[0.0, sol.sigma_lon], branch=first(sol.branch),
+                   sigma_terms={k: first(v) for k, v in sol.sigma_terms.items()})
+
+
 def _fmt_ms(x):
     return f"{1e3 * x:+.3f} ms"
 
@@ -359,7 +372,8 @@ def navigate_moving(imu: ImuData, attitude: AttitudeData, lat0, lon0, *, rates="
     s_sf_lat = sf * lp_n / np.maximum(A, 1e-12)
     s_sf_lon = sf * np.r_[0.0, np.cumsum(0.5 * np.diff(sol.t) * (lp_n[1:] + lp_n[:-1]))]
     base_lat = sol.sigma_lat
-    sol.sigma_lat = np.sqrt(base_lat**2 + s_time_lat**2 + s_sf_lat**2)
+    # σ of 90° means "no information" (a MEMS drift of many Ω): not larger
+    sol.sigma_lat = np.minimum(np.sqrt(base_lat**2 + s_time_lat**2 + s_sf_lat**2), np.pi / 2)
     sol.sigma_lon = np.sqrt(sol.sigma_lon**2 + s_time_lon**2 + s_sf_lon**2)
     sol.sigma_terms = {"sensors": base_lat, "timing": s_time_lat, "scale_factor": s_sf_lat}
     # --- onto the IMU clock
@@ -379,6 +393,8 @@ def navigate_moving(imu: ImuData, attitude: AttitudeData, lat0, lon0, *, rates="
     }
     if off.check is not None:
         sol.info["attitude_time_offset_check_s"] = off.check
+    # the start row: (14) starts at lon0 at the first attitude time; latitude as first solved
+    sol = _with_start_row(sol, float(g[0]), float(lon0))
     t_imu = np.asarray(imu.t, float)
     e = 1e-6 * gyro.step
     keep = (t_imu >= sol.t[0] - e) & (t_imu <= sol.t[-1] + e)
