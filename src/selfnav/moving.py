@@ -521,22 +521,17 @@ class MovingBaseNavigator:
         sig_w = error_budget(gain=self.gain, dt=h, smooth=self.smooth, **terms)["rate_total"]
         # start: the filters begin at the mean of the raw ω_n over 1/K, whose error is √2 × the
         # one-stage σ (the white parts averaged over 1/K); it decays as (1 + Kτ) e^{−Kτ} (two
-        # stages) or e^{−Kτ}, and its integral stays in the longitude
+        # stages) or e^{−Kτ}. In the longitude its integral (2/K or 1/K × the error) is taken
+        # back by the lag compensation's −L λ̇_f(t₀), which leaves L × the filtered white noise
         K = self.gain
         sig_w0 = np.sqrt(2.0) * error_budget(gain=K, dt=h, smooth=False, **terms)["rate_total"]
-        if self.smooth:
-            decay = (1.0 + K * tau) * np.exp(-K * tau)
-            lon0 = (2.0 - (2.0 + K * tau) * np.exp(-K * tau)) / K
-        else:
-            decay = np.exp(-K * tau)
-            lon0 = (1.0 - np.exp(-K * tau)) / K
+        decay = (1.0 + K * tau) * np.exp(-K * tau) if self.smooth else np.exp(-K * tau)
         s_lat = np.minimum(np.hypot(sig_w, decay * sig_w0) / A, np.pi / 2)   # 90°: no information
         rate_bias = np.hypot(s["gyro_bias"], s["attitude_rate"])
-        # the lag compensation L λ̇_f carries the filtered white noise
         white = error_budget(gain=K, dt=h, smooth=self.smooth,
                              **dict(terms, gyro_bias=0.0, attitude_rate=0.0))["rate_total"]
         s_lon = np.sqrt((rate_bias * tau) ** 2 + s["arw"] ** 2 * tau + s["attitude_noise"] ** 2
-                        + (sig_w0 * lon0) ** 2 + (self.lead * white) ** 2)
+                        + (self.lead * white) ** 2)
         return s_lat, s_lon
 
     # -- streaming

@@ -29,8 +29,14 @@ from selfnav import attitude as att
 from selfnav.earth import nav_rate_n
 from selfnav.io.attitude_file import check_against_gyros, check_gaps, overlap
 from selfnav.kernels import cumulative_rotation, rodrigues
-from selfnav.moving import (MovingBaseNavigator, MovingSolution, check_rates, coning_increments,
-                            gyro_increments, low_pass)
+from selfnav.moving import (
+    MovingBaseNavigator,
+    MovingSolution,
+    check_rates,
+    coning_increments,
+    gyro_increments,
+    low_pass,
+)
 from selfnav.moving_budget import grade_errors
 from selfnav.types import AttitudeData, ImuData
 
@@ -156,7 +162,7 @@ def _offset_step(gyro: GyroRecord, t_att, C_nb, offset, window_s):
     zeta = att.dcm_to_rotvec(C_bn[:-1] @ att.rotvec_to_dcm(rv) @ C_nb[1:])
     psi = np.vstack([np.zeros(3), np.cumsum(zeta, axis=0)])
     u = np.einsum("nij,nj->ni", C_bn, gyro.rates_at(g))
-    n = max(5, int(round(window_s / float(np.median(np.diff(g))))) | 1)
+    n = max(5, round(window_s / float(np.median(np.diff(g)))) | 1)
     psi_h, u_h = _high_pass(psi, n), _high_pass(u, n)
     h = n // 2
     psi_h, u_h = psi_h[h:len(g) - h], u_h[h:len(g) - h]
