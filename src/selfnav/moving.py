@@ -31,7 +31,7 @@ import numpy as np
 
 from selfnav import attitude as att
 from selfnav.earth import OMEGA_EARTH
-from selfnav.kernels import rodrigues
+from selfnav.kernels import mat3_mul, nav_increments, rodrigues
 from selfnav.moving_budget import BUDGET_KEYS, error_budget, grade_errors
 
 #: The two conventions for IMU rate rows (``--imu-rates``): the package's one convention
@@ -119,11 +119,9 @@ def omega_n_discrete(t, C_nb, rotvec_b):
     ``ζ_k = log(C_b^n(k) exp([Δθ_k]) C_n^b(k+1))``; returns ``(t_mid, ζ_k/Δt)``.
     """
     t = np.asarray(t, float)
-    C_nb = np.asarray(C_nb, float)
-    C_bn = np.swapaxes(C_nb, -1, -2)
-    E = C_bn[:-1] @ att.rotvec_to_dcm(rotvec_b) @ C_nb[1:]
-    dt = np.diff(t)
-    return 0.5 * (t[1:] + t[:-1]), att.dcm_to_rotvec(E) / dt[:, None]
+    zeta = nav_increments(np.ascontiguousarray(C_nb, dtype=float),
+                          np.ascontiguousarray(rotvec_b, dtype=float))
+    return 0.5 * (t[1:] + t[:-1]), zeta / np.diff(t)[:, None]
 
 
 def _derivative(t, x):
@@ -229,21 +227,25 @@ def _observer_kernel(dtheta, dt, C_bn_star, C_hat0, K, printed, drift):  # pragm
     err = np.empty(n)
     C_hat = C_hat0.copy()
     R = np.empty((3, 3))
+    Cm = np.empty((3, 3))
+    E = np.empty((3, 3))
+    Wn = np.empty((3, 3))
     for k in range(n):
         v = dtheta[k] - drift * dt[k]
         rodrigues(v[0], v[1], v[2], R)
-        Cm = C_hat @ R                                       # Ĉ propagated with the gyros, (16)
+        mat3_mul(C_hat, R, Cm)                               # Ĉ propagated with the gyros, (16)
         Cs = C_bn_star[k + 1]
-        E = Cm - Cs                                          # Ĉ − C*
+        E[:, :] = Cm - Cs                                    # Ĉ − C*
         if printed:
             wb = dtheta[k] / dt[k]
             Wb = np.array([[0.0, -wb[2], wb[1]], [wb[2], 0.0, -wb[0]], [-wb[1], wb[0], 0.0]])
-            Wn = (E @ (K * Cs - Wb)) @ Cs.T                  # (20)-(22): Δ (K C − [ω_b]) C^T
+            Wn[:, :] = (E @ (K * Cs - Wb)) @ Cs.T            # (20)-(22): Δ (K C − [ω_b]) C^T
             C_hat = Cm - dt[k] * K * (E @ Cs)                # printed correction −(Ĉ − C*) K C
         else:
             a = 1.0 - np.exp(-K * dt[k])
-            Wn = (a / dt[k]) * (E @ Cs.T)                    # stable: [ω_n] ≈ K (Ĉ − C*) C*^T
-            C_hat = Cm - a * E                               # stable correction −K (Ĉ − C*)
+            mat3_mul(E, Cs.T, Wn)                            # stable: [ω_n] ≈ K (Ĉ − C*) C*^T
+            Wn *= a / dt[k]
+            C_hat[:, :] = Cm - a * E                         # stable correction −K (Ĉ − C*)
         out[k, 0] = 0.5 * (Wn[2, 1] - Wn[1, 2])
         out[k, 1] = 0.5 * (Wn[0, 2] - Wn[2, 0])
         out[k, 2] = 0.5 * (Wn[1, 0] - Wn[0, 1])

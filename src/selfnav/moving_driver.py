@@ -28,7 +28,7 @@ from scipy.interpolate import CubicSpline
 from selfnav import attitude as att
 from selfnav.earth import nav_rate_n
 from selfnav.io.attitude_file import check_against_gyros, check_gaps, overlap
-from selfnav.kernels import cumulative_rotation, rodrigues
+from selfnav.kernels import cumulative_rotation, nav_increments, relative_rotations, rodrigues
 from selfnav.moving import (
     MovingBaseNavigator,
     MovingSolution,
@@ -84,15 +84,13 @@ class GyroRecord:
         e = tol * self.step
         return (t >= a - e) & (t <= b + e)
 
-    def _orientation(self, grid):
+    def rotations(self, grid):
+        """Body rotation vectors over ``[grid_j, grid_{j+1}]`` (M-1, 3): the orientation at each
+        grid time is the product of the whole steps times the partial step from the spline."""
+        grid = np.asarray(grid, float)
         k = np.clip(np.searchsorted(self.tau, grid, side="right") - 1, 0, len(self.rv) - 1)
         part = self.spline(grid) - self.S[k]
-        return self.Q[k] @ att.rotvec_to_dcm(part)
-
-    def rotations(self, grid):
-        """Body rotation vectors over ``[grid_j, grid_{j+1}]`` (M-1, 3)."""
-        R = self._orientation(np.asarray(grid, float))
-        return att.dcm_to_rotvec(np.swapaxes(R[:-1], -1, -2) @ R[1:])
+        return relative_rotations(self.Q, k, np.ascontiguousarray(part))
 
     def rates_at(self, grid):
         """Body rates at ``grid`` (M, 3), the derivative of the spline of the summed rotations."""
@@ -158,8 +156,7 @@ def _offset_step(gyro: GyroRecord, t_att, C_nb, offset, window_s):
     g = g[m]
     C_nb = C_nb[m]
     C_bn = np.swapaxes(C_nb, -1, -2)
-    rv = gyro.rotations(g)
-    zeta = att.dcm_to_rotvec(C_bn[:-1] @ att.rotvec_to_dcm(rv) @ C_nb[1:])
+    zeta = nav_increments(np.ascontiguousarray(C_nb), gyro.rotations(g))
     psi = np.vstack([np.zeros(3), np.cumsum(zeta, axis=0)])
     u = np.einsum("nij,nj->ni", C_bn, gyro.rates_at(g))
     n = max(5, round(window_s / float(np.median(np.diff(g)))) | 1)
@@ -184,16 +181,20 @@ def _offset_step(gyro: GyroRecord, t_att, C_nb, offset, window_s):
 
 
 def estimate_time_offset(gyro: GyroRecord, t_att, C_nb, *, offset0=0.0, max_offset=MAX_OFFSET_S,
-                         window_s=10.0, iterations=8, tol=1e-7, min_rate=2e-3) -> TimeOffset:
+                         window_s=10.0, iterations=8, tol=1e-7, min_rate=2e-3,
+                         max_rate_hz=50.0) -> TimeOffset:
     """Attitude–gyro clock offset from the record: the attitude's rotation against the gyros'.
 
     Gauss-Newton on :func:`_offset_step` from ``offset0`` (each step re-composes the gyros onto
     the shifted attitude times, so the model is linear in the small remaining offset), stopped
     when the correction is below ``tol`` s. Without motion (high-passed body rate below
     ``min_rate`` rad/s) the offset is not observable — and does not matter: it stays
-    ``offset0`` with σ ``max_offset``.
+    ``offset0`` with σ ``max_offset``. An attitude faster than ``max_rate_hz`` is thinned to it
+    for the estimate (the regression needs the motion's band, not every sample).
     """
     t_att = np.asarray(t_att, float)
+    step = max(1, int(np.floor(1.0 / (max_rate_hz * float(np.median(np.diff(t_att)))) + 1e-9)))
+    t_att, C_nb = t_att[::step], C_nb[::step]
     off, sig, rate = float(offset0), np.inf, 0.0
     it = 0
     for it in range(1, iterations + 1):
