@@ -31,6 +31,7 @@ import numpy as np
 
 from selfnav import attitude as att
 from selfnav.earth import OMEGA_EARTH
+from selfnav.io.csvio import write_csv
 from selfnav.kernels import mat3_mul, nav_increments, rodrigues
 from selfnav.moving_budget import BUDGET_KEYS, error_budget, grade_errors
 
@@ -394,8 +395,6 @@ class MovingSolution:
     def to_csv(self, path, *, step_s: float = 0.0, comments=()):
         """Write ``t, lat_deg, lon_deg, sigma_lat_deg, sigma_lon_deg`` atomically; with
         ``step_s > 0`` one row per ``step_s`` seconds (and the last). Returns the row count."""
-        from selfnav.io.csvio import write_csv
-
         keep = np.ones(len(self.t), bool)
         if step_s > 0:
             b = np.floor((self.t - self.t[0]) / step_s)

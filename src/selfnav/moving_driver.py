@@ -25,10 +25,15 @@ import numba
 import numpy as np
 from scipy.interpolate import CubicSpline
 
-from selfnav import attitude as att
 from selfnav.earth import nav_rate_n
+from selfnav.errors import InputError
 from selfnav.io.attitude_file import check_against_gyros, check_gaps, overlap
-from selfnav.kernels import cumulative_rotation, nav_increments, relative_rotations, rodrigues
+from selfnav.kernels import (
+    cumulative_rotation,
+    nav_increments,
+    relative_rotations,
+    rodrigues,
+)
 from selfnav.moving import (
     MovingBaseNavigator,
     MovingSolution,
@@ -358,7 +363,8 @@ def navigate_moving(imu: ImuData, attitude: AttitudeData, lat0, lon0, *, rates="
     g = t_att - off.offset
     m = gyro.inside(g)
     if m.sum() < 3:
-        raise ValueError("fewer than 3 attitude samples inside the IMU span after the time offset")
+        raise InputError(src_att, f"fewer than 3 attitude samples inside the IMU span after the "
+                         f"time offset of {_fmt_ms(off.offset)}", column="t")
     g = g[m]
     C_nb = attitude.C_nb[m]
     rv = gyro.rotations(g)
