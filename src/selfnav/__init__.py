@@ -21,7 +21,8 @@ The Python API (each also a ``selfnav`` command):
 >>> selfnav.evaluate("truth.csv", sol)["horizontal_rms_m"] # doctest: +SKIP
 
 ``read_imu, read_gnss, read_roads, read_solution, read_attitude`` read files;
-``estimate_latitude`` (seed 000), ``MovingBaseNavigator`` (seeds 002/003), ``navigate``
+``estimate_latitude`` (seed 000), ``navigate_moving`` and ``MovingBaseNavigator`` (seeds
+002/003), ``navigate``
 (EKF or seed 004, with or without roads), ``match`` (GNSS-only map matching) and
 ``evaluate`` run the methods; ``simulate`` makes data with known truth.
 """
@@ -40,6 +41,7 @@ _API = {
     "map_coverage": "selfnav.api", "check_map_covers": "selfnav.api", "imu_gaps": "selfnav.api",
     "simulate_files": "selfnav.api", "run_montecarlo": "selfnav.api",
     "simulate": "selfnav.simulate.scenarios", "MovingBaseNavigator": "selfnav.moving",
+    "navigate_moving": "selfnav.moving_driver",
     "ImuData": "selfnav.types", "GnssData": "selfnav.types", "Trajectory": "selfnav.types",
     "AttitudeData": "selfnav.types",
 }

@@ -122,6 +122,22 @@ def earth_rate_n(lat, omega: float = OMEGA_EARTH):
     return np.stack([z, omega * np.cos(lat), omega * np.sin(lat)], axis=-1)
 
 
+def transport_rate_n(lat, velocity_n, h=0.0, ellipsoid: Ellipsoid = WGS84):
+    """``ω_en^n = (−v_N/R_φ, v_E/R_λ, v_E tan φ / R_λ)`` in ENU for a velocity over the
+    ellipsoid, rad/s (..., 3) (seed 004 (6))."""
+    lat = np.asarray(lat, dtype=float)
+    velocity_n = np.asarray(velocity_n, dtype=float)
+    r_phi, r_lam = radii(lat, h, ellipsoid)
+    ve, vn = velocity_n[..., 0], velocity_n[..., 1]
+    return np.stack([-vn / r_phi, ve / r_lam, ve * np.tan(lat) / r_lam], axis=-1)
+
+
+def nav_rate_n(lat, velocity_n, h=0.0, ellipsoid: Ellipsoid = WGS84):
+    """Absolute rate of the ENU navigation frame ``ω_in^n = ω_ie^n + ω_en^n``, rad/s (..., 3)
+    (seed 002 (1): ``(−φ̇, (Ω + λ̇) cos φ, (Ω + λ̇) sin φ)``)."""
+    return earth_rate_n(lat, ellipsoid.omega) + transport_rate_n(lat, velocity_n, h, ellipsoid)
+
+
 def geodetic_to_ecef(lat, lon, h=0.0, ellipsoid: Ellipsoid = WGS84):
     """Geodetic (rad, rad, m) to ECEF (m), shape ``(..., 3)``."""
     lat = np.asarray(lat, dtype=float)
