@@ -178,7 +178,6 @@ def _umask():
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(reason="navigator re-initialisation after gaps: lead engineer", strict=False)
 def test_real_drive_60s_imu_gap_reinitialises(tmp_path, capsys, shared_data):
     """Issue 12 acceptance: 60 s of IMU rows cut from the real drive (RTK as truth): error at
     most 5 m outside the gap and the 30 s after it, no solution row inside the gap, and one

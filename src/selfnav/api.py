@@ -18,6 +18,7 @@ from selfnav.evaluate import load_road_polylines
 from selfnav.ins import calibrate
 from selfnav.ins.align import robust_init
 from selfnav.io.attitude_file import read_attitude
+from selfnav.io.imu import imu_segments, report_gaps
 from selfnav.io.readers import read_gnss, read_imu, read_imu_positions
 from selfnav.latitude import LatitudeResult
 from selfnav.latitude import estimate_latitude as _estimate_latitude
@@ -32,6 +33,8 @@ from selfnav.types import GnssData, ImuData, Trajectory
 METHODS = ("ekf", "seed")
 #: a run that leaves more of its fixes unused than this warns (one line)
 REJECTION_WARNING = 0.2
+#: an IMU stretch between gaps shorter than this is not navigated, s
+MIN_SEGMENT_S = 10.0
 
 
 def estimate_latitude(imu: ImuData, *, method: str = "optimal", **kw) -> LatitudeResult:
@@ -161,6 +164,7 @@ def navigate(imu: ImuData, gnss: GnssData | None, roads=None, *, method: str = "
     """
     if method not in METHODS:
         raise SelfnavError(f"unknown method '{method}' (use {' or '.join(METHODS)})")
+    imu = report_gaps(imu)          # short gaps bridged, each long one said in one line
     if gnss is None:
         if init is None:
             raise SelfnavError("without GNSS the navigator needs an initial state (--init FILE)")
@@ -202,17 +206,35 @@ def navigate(imu: ImuData, gnss: GnssData | None, roads=None, *, method: str = "
     if notes and str(grade).lower() != "auto" and config is None:
         warnings.warn(f"the IMU is noisier than the '{grade}' preset says ({'; '.join(notes)}): "
                       "using the measured noise", SelfnavWarning, stacklevel=2)
-    aid = None
-    if graph is not None:
-        aid = EkfRoadAid(graph, gnss)
-    if init is not None:
-        start = initial_state(init, imu, cfg)
-    else:
-        # start only after a run of fixes that look healthy without an INS (an outlier window
-        # at start-up must not seed the navigator hundreds of metres off)
-        start = robust_init(imu, gnss, cfg=cfg)
-    res = ins.run_filter(imu, gnss, cfg, init=start, smooth=smooth, progress=progress,
-                         road_aid=aid)
+    # an IMU gap longer than a few samples ends a segment: each is navigated on its own and
+    # re-initialised from GNSS after the gap; no row stands inside a gap
+    results = []
+    segments = imu_segments(imu)
+    for n_seg, sl in enumerate(segments):
+        part = imu.select(sl)
+        span = (part.t[0], part.t[-1])
+        g_part = gnss.select((gnss.t >= span[0]) & (gnss.t <= span[1]))
+        if part.duration < MIN_SEGMENT_S or (init is None or n_seg) and len(g_part) < 10:
+            warnings.warn(f"IMU samples {span[0]:.3f}…{span[1]:.3f} s are too short or have too "
+                          "few fixes to navigate: no solution there", SelfnavWarning,
+                          stacklevel=2)
+            continue
+        aid = EkfRoadAid(graph, g_part) if graph is not None else None
+        if init is not None and n_seg == 0:
+            start = initial_state(init, part, cfg)
+        else:
+            # start only after a run of fixes that look healthy without an INS (an outlier
+            # window at start-up must not seed the navigator hundreds of metres off)
+            start = robust_init(part, g_part, cfg=cfg)
+        prog = None if progress is None else (
+            lambda x, a=n_seg, n=len(segments): progress((a + x) / n))
+        results.append(ins.run_filter(part, g_part, cfg, init=start, smooth=smooth,
+                                      progress=prog, road_aid=aid))
+    if not results:
+        raise SelfnavError("no stretch of the IMU record could be navigated (gaps, or no GNSS "
+                           "over it)")
+    res = ins.concatenate_results(results)
+    stats["imu_segments"] = len(results)
     # without a given lever arm, the antenna is the point the data defines (the lever arm is
     # an estimate); rows at true time (the residual time-offset state)
     point = "antenna" if cfg.states.lever_arm else "imu"

@@ -109,7 +109,7 @@ def register(app: typer.Typer) -> None:
     ):
         """Navigate with an IMU and GNSS; survives unflagged GNSS outliers (window test)."""
         from selfnav import api
-        from selfnav.io.imu import check_imu_rate, report_gaps
+        from selfnav.io.imu import check_imu_rate
         from selfnav.io.output import check_output_file
 
         check_output_file(out)
@@ -122,7 +122,6 @@ def register(app: typer.Typer) -> None:
         data = _magnetometer(api.read_imu(imu, imu_format), mag)
         check_imu_rate(data, "navigate", min_duration_s=MIN_IMU_S, max_dt_s=MAX_IMU_DT_S,
                        warn_dt_s=WARN_IMU_DT_S)
-        data = report_gaps(data)
         g = api.read_gnss(gnss, gnss_format, gnss_datum) if gnss is not None else None
         graph = None
         if map_ is not None:

@@ -687,6 +687,33 @@ class StreamingNavigator:
             np.array([codes[c] for c in q], dtype=object), fix_log)
 
 
+def concatenate_results(results) -> FilterResult:
+    """One :class:`FilterResult` from the results of consecutive segments (an IMU gap between
+    each): epochs and fixes joined in time order, the counts summed."""
+    if len(results) == 1:
+        return results[0]
+
+    def cat(name):
+        xs = [getattr(r, name) for r in results]
+        return None if any(x is None for x in xs) else np.concatenate(xs)
+
+    tr = [r.trajectory for r in results]
+    traj = Trajectory(np.concatenate([x.t for x in tr]), np.concatenate([x.lat for x in tr]),
+                      np.concatenate([x.lon for x in tr]), np.concatenate([x.h for x in tr]),
+                      np.concatenate([x.velocity_n for x in tr]),
+                      np.concatenate([x.C_nb for x in tr]), tr[0].source)
+    stats = {}
+    for r in results:
+        for k, v in r.stats.items():
+            stats[k] = stats[k] + v if k in stats and isinstance(v, (int, float)) else v
+    log = {k: np.concatenate([r.fix_log[k] for r in results]) for k in results[0].fix_log}
+    return FilterResult(traj, cat("sigma_enu"), cat("sigma_vel"), cat("sigma_att"),
+                        cat("gyro_bias"), cat("accel_bias"), cat("fix_t"), cat("fix_status"),
+                        cat("innovations"), cat("nis"), cat("mode"), results[0].smoothed, stats,
+                        cat("mounting"), cat("lever_arm"), cat("time_offset"),
+                        cat("gnss_status"), log)
+
+
 def output_trajectory(res: FilterResult, *, antenna: bool = False) -> Trajectory:
     """The trajectory at true time: the INS state of stamp ``t`` is the truth at ``t + ε̂``
     (the estimated residual time offset), so each row's position is moved back by
