@@ -208,31 +208,38 @@ def navigate(imu: ImuData, gnss: GnssData | None, roads=None, *, method: str = "
                       "using the measured noise", SelfnavWarning, stacklevel=2)
     # an IMU gap longer than a few samples ends a segment: each is navigated on its own and
     # re-initialised from GNSS after the gap; no row stands inside a gap
-    results = []
+    results, skipped = [], []
     segments = imu_segments(imu)
     for n_seg, sl in enumerate(segments):
         part = imu.select(sl)
         span = (part.t[0], part.t[-1])
         g_part = gnss.select((gnss.t >= span[0]) & (gnss.t <= span[1]))
         if part.duration < MIN_SEGMENT_S or (init is None or n_seg) and len(g_part) < 10:
-            warnings.warn(f"IMU samples {span[0]:.3f}…{span[1]:.3f} s are too short or have too "
-                          "few fixes to navigate: no solution there", SelfnavWarning,
-                          stacklevel=2)
+            skipped.append(f"IMU samples {span[0]:.3f}…{span[1]:.3f} s are too short or have "
+                           "too few fixes to navigate")
             continue
         aid = EkfRoadAid(graph, g_part) if graph is not None else None
-        if init is not None and n_seg == 0:
-            start = initial_state(init, part, cfg)
-        else:
-            # start only after a run of fixes that look healthy without an INS (an outlier
-            # window at start-up must not seed the navigator hundreds of metres off)
-            start = robust_init(part, g_part, cfg=cfg)
+        try:
+            if init is not None and n_seg == 0:
+                start = initial_state(init, part, cfg)
+            else:
+                # start only after a run of fixes that look healthy without an INS (an outlier
+                # window at start-up must not seed the navigator hundreds of metres off)
+                start = robust_init(part, g_part, cfg=cfg)
+        except SelfnavError as e:
+            skipped.append(f"IMU samples {span[0]:.3f}…{span[1]:.3f} s: {e}")
+            continue
         prog = None if progress is None else (
             lambda x, a=n_seg, n=len(segments): progress((a + x) / n))
         results.append(ins.run_filter(part, g_part, cfg, init=start, smooth=smooth,
                                       progress=prog, road_aid=aid))
     if not results:
-        raise SelfnavError("no stretch of the IMU record could be navigated (gaps, or no GNSS "
-                           "over it)")
+        if len(segments) == 1:
+            raise SelfnavError(skipped[0].split(": ", 1)[-1])
+        raise SelfnavError("no stretch of the IMU record between its gaps could be navigated "
+                           f"({skipped[0]})")
+    for why in skipped:
+        warnings.warn(f"{why}: no solution there", SelfnavWarning, stacklevel=2)
     res = ins.concatenate_results(results)
     stats["imu_segments"] = len(results)
     # without a given lever arm, the antenna is the point the data defines (the lever arm is
