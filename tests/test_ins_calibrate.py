@@ -122,13 +122,15 @@ def test_noise_scale_rises_on_overconfidence_and_never_falls_below_one():
     for _ in range(5000):
         ad.on_fix(flt, 0.1, 2)
     assert flt.q_scale == 1.0
-    # an honest shadow leaves the bias-noise scale alone; a pessimistic one lowers it
-    for _ in range(300):
-        ad.on_shadow(flt, 2.0, 2)
-    assert flt.bias_scale == 1.0
-    for _ in range(300):
-        ad.on_shadow(flt, 0.02, 2)
-    assert flt.bias_scale < 0.5
+    # the shadows' variance ratio from the share of χ² beyond the median: honest ≈ 1, errors
+    # with 4× the predicted variance ≈ 4 (robust to a heavy tail)
+    rng = np.random.default_rng(0)
+    for kappa in (1.0, 4.0):
+        ad = calibrate.NoiseAdapter()
+        for c in rng.chisquare(2, 3000) * kappa:
+            ad.on_shadow(c, 2)
+        assert ad.dr_ratio == pytest.approx(kappa, rel=0.35)
+        assert ad.shadow_scale == pytest.approx(2.0 * np.sqrt(max(kappa, 1.0)), rel=0.2)
 
 
 def test_output_trajectory_moves_rows_to_the_antenna_and_to_true_time():

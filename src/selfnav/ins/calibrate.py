@@ -49,6 +49,8 @@ STILL_SPEED = 0.3
 WHITE_TAU = (0.3, 3.0)
 #: the measured noise wins over the prior when it is this many times larger (and is reported)
 NOISIER_THAN_PRIOR = 2.0
+#: median of χ² with 2 degrees of freedom (2 ln 2)
+CHI2_2_MEDIAN = 1.3862943611198906
 #: seconds of still data after which the measured white noise replaces the prior both ways
 WHITE_TRUST_S = 20.0
 #: the GNSS course is used above this speed, m/s
@@ -335,35 +337,44 @@ class NoiseAdapter:
       innovations stay above their dimension (the INS is more uncertain than it says) and
       decays back to 1 otherwise — never below: a few quiet minutes must not leave the next
       outage overconfident;
-    * ``λ_b`` (the scale of the slowly varying part: bias instability, lever arm, time
-      offset) follows the shadows' dead-reckoning errors over 5–90 s against their σ, both
-      ways, between ``bias_lo`` and ``bias_hi``: the horizon where that part decides, and the
-      part a still segment cannot measure;
-    * the shadows' σ inflation (their χ² test of fixes) follows the same errors, between
+    * the shadows' σ inflation (their χ² test of fixes) follows the shadows' own
+      dead-reckoning errors over 5–90 s against their σ (:attr:`dr_ratio`), between
       ``sigma_scale`` and ``shadow_scale_max``: an honestly uncertain shadow must not reject
       clean fixes.
+
+    (Driving the bias-noise scale ``λ_b`` from the same shadow errors was tried and left
+    out: the shadows' errors lag the scale they were branched with, and the loop wandered to
+    its bounds on simulated drives whose matched noise needed no change.)
 
     Parameters
     ----------
     hi : largest ``λ``
-    up_step : largest factor one fix may raise ``λ`` (or ``λ_b``) by
-    decay : factor per trusted fix back towards 1 (``λ``), and ``λ_b``'s step down
-    memory : fixes (or shadow tests) over which the normalised errors are averaged
-    trigger : mean normalised error per dimension above which the scales rise; below its
-        inverse ``λ_b`` falls
+    up_step : largest factor one fix may raise ``λ`` by
+    decay : factor per trusted fix back towards 1
+    memory : fixes over which the normalised innovations are averaged (three times as many
+        shadow tests)
+    trigger : mean normalised innovation per dimension above which ``λ`` rises
     """
 
     def __init__(self, sigma_scale=2.0, shadow_scale_max=10.0, hi=1e4, up_step=1.1,
-                 decay=0.995, memory=40, trigger=2.0, bias_lo=0.01, bias_hi=100.0):
+                 decay=0.995, memory=40, trigger=2.0):
         self.hi, self.up_step, self.decay, self.trigger = hi, up_step, decay, trigger
-        self.bias_lo, self.bias_hi = bias_lo, bias_hi
         self.alpha = 1.0 / memory
+        self.alpha_dr = 1.0 / (3 * memory)
         self.base_scale, self.scale_max = sigma_scale, shadow_scale_max
         self.fix_ratio = 1.0     # running mean of NIS/dof of trusted fixes
-        self.dr_ratio = 1.0      # running mean of shadow χ²/dof at trusted fixes
+        self._above = 0.5        # running share of shadow χ² beyond the χ²₂ median
         self.dr_samples = 0
         self.updates = 0
         self.raised = False
+
+    @property
+    def dr_ratio(self) -> float:
+        """The shadows' actual/predicted error variance, from the share of fixes beyond the
+        median of χ²₂: for errors κ times the predicted variance, P(χ² > 1.386) = ½^(1/κ), so
+        κ̂ = ln ½ / ln p̂ (robust: the heavy tails of dead reckoning in turns do not decide)."""
+        p = float(np.clip(self._above, 0.02, 0.98))
+        return float(np.log(0.5) / np.log(p))
 
     @property
     def shadow_scale(self) -> float:
@@ -385,20 +396,11 @@ class NoiseAdapter:
             self.updates += 1
             self.raised = self.raised or new > 3.0
 
-    def on_shadow(self, flt, chi2_value, dof):
-        """A trusted fix against a mature shadow (its dead-reckoning error over 5–90 s)."""
-        x = min(chi2_value / dof, 25.0)
-        self.dr_ratio += self.alpha * (x - self.dr_ratio)
+    def on_shadow(self, chi2_value, dof):
+        """A trusted fix against a mature shadow (its dead-reckoning error over 5–90 s), 2 dof:
+        updates the shadows' variance ratio (:attr:`dr_ratio`)."""
+        self._above += self.alpha_dr * (float(chi2_value > CHI2_2_MEDIAN) - self._above)
         self.dr_samples += 1
-        if self.dr_samples < 1.0 / self.alpha:
-            return
-        if self.dr_ratio > self.trigger:
-            k = min(self.up_step, (self.dr_ratio / self.trigger) ** 0.25)
-        elif self.dr_ratio < 1.0 / self.trigger:
-            k = max(self.decay, (self.dr_ratio * self.trigger) ** 0.25)
-        else:
-            return
-        flt.bias_scale = float(np.clip(flt.bias_scale * k, self.bias_lo, self.bias_hi))
 
 
 def calibrated_config(cfg: FilterConfig, imu: ImuData, gnss: GnssData | None = None):

@@ -501,7 +501,7 @@ class StreamingNavigator:
         ad.on_fix(self.flt, nis_h, 2)
         if self.guard is not None:
             for c in self.guard.last_chi2:      # this fix against each mature shadow
-                ad.on_shadow(self.flt, c, 2)
+                ad.on_shadow(c, 2)
 
     def _shadow_scale(self):
         return (self.cfg.shadows.sigma_scale if self.adapter is None
