@@ -373,14 +373,13 @@ class NoiseAdapter:
         """The shadows' actual/predicted error variance, from the share of fixes beyond the
         median of χ²₂: for errors κ times the predicted variance, P(χ² > 1.386) = ½^(1/κ), so
         κ̂ = ln ½ / ln p̂ (robust: the heavy tails of dead reckoning in turns do not decide)."""
-        p = float(np.clip(self._above, 0.02, 0.98))
-        return float(np.log(0.5) / np.log(p))
+        p = min(max(self._above, 0.02), 0.98)
+        return math.log(0.5) / math.log(p)
 
     @property
     def shadow_scale(self) -> float:
         """σ inflation of the shadows' fix test."""
-        return float(np.clip(self.base_scale * np.sqrt(max(self.dr_ratio, 1.0)),
-                             self.base_scale, self.scale_max))
+        return min(self.base_scale * math.sqrt(max(self.dr_ratio, 1.0)), self.scale_max)
 
     def on_fix(self, flt, nis_value, dof):
         """A trusted fix with normalised innovation ``nis_value`` of ``dof`` dimensions."""
@@ -390,7 +389,7 @@ class NoiseAdapter:
             k = min(self.up_step, (self.fix_ratio / self.trigger) ** 0.25)
         else:
             k = self.decay
-        new = float(np.clip(flt.q_scale * k, 1.0, self.hi))
+        new = min(max(flt.q_scale * k, 1.0), self.hi)
         if new != flt.q_scale:
             flt.q_scale = new
             self.updates += 1

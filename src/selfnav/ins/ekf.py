@@ -600,8 +600,8 @@ def unpack_states(t, states, Ps):
     C = states[:, PACK["C"]].reshape(-1, 3, 3)
     traj = Trajectory(t, states[:, 0], states[:, 1], states[:, 2], states[:, PACK["vel"]], C,
                       source="selfnav ekf")
-    sig = np.sqrt(np.maximum(np.diagonal(Ps, axis1=1, axis2=2), 0.0))
-    return traj, sig
+    var = Ps if Ps.ndim == 2 else np.diagonal(Ps, axis1=1, axis2=2)   # variances or covariances
+    return traj, np.sqrt(np.maximum(var, 0.0))
 
 
 def apply_error(state, dx, layout: StateLayout):

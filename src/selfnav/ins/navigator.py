@@ -121,7 +121,10 @@ class StreamingNavigator:
     road_aid : callable, optional
         ``road_aid(t, flt) -> None | dict`` (see :func:`run_filter`).
     record : bool
-        Keep every epoch for :meth:`result` (and the smoother).
+        Keep every epoch for :meth:`result`.
+    smoother : bool
+        Also keep what the RTS smoother needs (covariances, transitions, corrections); without
+        it only the state and the error-state variances are kept (faster, less memory).
 
     Notes
     -----
@@ -129,7 +132,8 @@ class StreamingNavigator:
     at the next epoch, which batch processing would not do).
     """
 
-    def __init__(self, cfg: FilterConfig, init: dict, *, road_aid=None, record: bool = True):
+    def __init__(self, cfg: FilterConfig, init: dict, *, road_aid=None, record: bool = True,
+                 smoother: bool = True):
         self.cfg = cfg
         t0 = float(init["t"])
         flt = InsGnssFilter(cfg, t0, init["lat"], init["lon"], init["h"], init["velocity_n"],
@@ -149,6 +153,7 @@ class StreamingNavigator:
         self.t0 = t0
         self.road_aid = road_aid
         self.record = record
+        self.smoother = smoother
         self._n_aid = 1
         self._events = []          # heap of (t, kind, seq, k)
         self._seq = 0
@@ -300,6 +305,11 @@ class StreamingNavigator:
         r = self.rec
         r["t"].append(te)
         r["state"].append(pack_state(self.flt))
+        r["q"].append(self._row_status(te))
+        if not self.smoother:
+            r["P"].append(np.diag(self.flt.P).copy())
+            self._widened, self._reset = None, False
+            return
         r["P"].append(self.flt.P.copy())
         # covariance added without a measurement is process noise: part of the prior
         r["Pm"].append(Pm if self._widened is None else Pm + self._widened)
@@ -307,7 +317,6 @@ class StreamingNavigator:
         r["Phi"].append(self.flt.take_transition())
         r["dx"].append(dx)
         r["brk"].append(self._reset)
-        r["q"].append(self._row_status(te))
         self._reset = False
 
     def _row_status(self, te):
@@ -329,7 +338,7 @@ class StreamingNavigator:
             w_blk, f_blk = self._predict()
         else:
             w_blk = f_blk = np.zeros((0, 3))
-        Pm = flt.P.copy()
+        Pm = flt.P.copy() if self.smoother else None
         dx = np.zeros(flt.nx)
         veh = cfg.vehicle
         if kind == 1:
@@ -651,6 +660,8 @@ class StreamingNavigator:
         states = np.asarray(r["state"])
         Ps = np.asarray(r["P"])
         smoothed = False
+        if smooth and not self.smoother:
+            raise SelfnavError("this navigator kept no smoother record (smoother=False)")
         if smooth and len(t) > 2:
             states, Ps = rts_smooth(states, Ps, np.asarray(r["Pm"]), np.asarray(r["Phi"]),
                                     np.asarray(r["dx"]), self.flt.layout,
@@ -770,7 +781,7 @@ def run_filter(imu, gnss: GnssData, cfg: FilterConfig | None = None, *, init=Non
     n = len(gnss.t)
     if init is None:
         init = init_from_gnss(imu, gnss, cfg, fixes_sigma(gnss, cfg))
-    nav = StreamingNavigator(cfg, init, road_aid=road_aid)
+    nav = StreamingNavigator(cfg, init, road_aid=road_aid, smoother=smooth)
 
     def col(x, k):
         return np.nan if x is None else x[k]
