@@ -97,6 +97,11 @@ def test_fix_chain_anchors_clean_fixes_and_breaks_at_a_jump_or_a_drift():
     d[40:] += np.outer(t[40:] - t[40], [0.3, 0.0])
     links = [chain.add(t[k], d[k], v[k], 0.01, 0.05, True)[0] for k in range(len(t))]
     assert not all(links[40:60])
+    # a change of the receiver's quality flag (RTK fixed -> float) breaks the chain
+    chain = FixChain()
+    qual = np.where(np.arange(len(t)) < 50, 1, 2)
+    links = [chain.add(t[k], p[k], v[k], 0.01, 0.05, True, qual[k])[0] for k in range(len(t))]
+    assert all(links[1:50]) and not links[50] and links[51]
     # no velocity: never anchored
     chain = FixChain()
     assert not any(chain.add(t[k], p[k], None, 0.01, 0.05, True)[1] for k in range(10))

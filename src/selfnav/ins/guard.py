@@ -247,7 +247,8 @@ class FixChain:
     linked to a fix that was used or itself anchored: a chain of such fixes is evidence
     against an INS that rejects them, not against the fixes. A jump, white noise or a drift
     breaks the chain; a fix without velocity (or too imprecise for the test to mean anything)
-    is never anchored. Horizontal only.
+    is never anchored, and a change of the receiver's quality flag (RTK fixed → float, …)
+    breaks the chain: such switches come with jumps. Horizontal only.
 
     Parameters
     ----------
@@ -265,6 +266,7 @@ class FixChain:
         self.gate = gate
         self.hist = []          # (t, p_EN (2,), v_EN (2,), σ_p, σ_v, anchored)
         self.breaks = 0
+        self._quality = None
 
     def _test(self, a, b, span):
         dt = b[0] - a[0]
@@ -279,12 +281,16 @@ class FixChain:
         var = a[3] ** 2 + b[3] ** 2 + var_v + (self.vel_bias * dt) ** 2
         return float(d @ d) / var <= self.gate and dt > 0
 
-    def add(self, t, p_en, v_en, sigma_p, sigma_v, used_prev: bool):
-        """Add a fix; returns ``(linked, anchored)``. ``used_prev``: the previous fix was used."""
+    def add(self, t, p_en, v_en, sigma_p, sigma_v, used_prev: bool, quality=None):
+        """Add a fix; returns ``(linked, anchored)``. ``used_prev``: the previous fix was used;
+        ``quality``: the receiver's flag (any scale; a change breaks the chain)."""
         if self.hist:
             last = self.hist[-1]
             self.hist[-1] = last[:5] + (last[5] or used_prev,)
-        ok = (v_en is not None and np.all(np.isfinite(v_en)) and sigma_p <= self.max_sigma)
+        same_quality = quality is None or self._quality is None or quality == self._quality
+        self._quality = quality
+        ok = (v_en is not None and np.all(np.isfinite(v_en)) and sigma_p <= self.max_sigma
+              and same_quality)
         rec = (float(t), np.asarray(p_en, float)[:2], None if v_en is None else np.asarray(v_en, float)[:2],
                float(sigma_p), float(sigma_v), False)
         linked = False

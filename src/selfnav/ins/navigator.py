@@ -376,7 +376,8 @@ class StreamingNavigator:
             return False, False
         p = enu_offset(self.fixes[0].lat, self.fixes[0].lon, 0.0, fx.lat, fx.lon, 0.0)
         v = None if fx.velocity_n is None else fx.velocity_n[:2]
-        out = self.chain.add(fx.t, p[:2], v, fx.sigma_file, fx.sigma_vel, self._last_used)
+        out = self.chain.add(fx.t, p[:2], v, fx.sigma_file, fx.sigma_vel, self._last_used,
+                             fx.quality)
         return out
 
     def _log(self, k, code, reason, **vals):
