@@ -65,8 +65,9 @@ def test_enu_round_trips(lat0, lon0, h0, e, n, u):
     # the small-offset form and its inverse agree exactly with each other ...
     la2, lo2, h2 = offset_to_geodetic(lat0, lon0, h0, enu)
     assert np.allclose(enu_offset(lat0, lon0, h0, la2, lo2, h2), enu, atol=1e-9)
-    # ... and with the exact tangent plane to its curvature error, ~ d² (1 + |tan φ|) / R
-    tol = 0.01 + (e * e + n * n) / 6.3e6 * (1.0 + abs(np.tan(lat0)))
+    # ... and with the exact tangent plane to its curvature error, ~ d (d (1 + |tan φ|) + |u|) / R
+    d = np.hypot(e, n)
+    tol = 0.01 + d * (d * (1.0 + abs(np.tan(lat0))) + abs(u)) / 6.3e6
     assert np.allclose(enu_offset(lat0, lon0, h0, la, lo, hh)[:2], enu[:2], atol=tol)
 
 
