@@ -220,9 +220,11 @@ def enu_offset(lat0, lon0, h0, lat, lon, h, ellipsoid: Ellipsoid = WGS84):
         w = math.sqrt(1.0 - ellipsoid.e2 * s2)
         rn = ellipsoid.a / w + h0
         rm = ellipsoid.a * (1.0 - ellipsoid.e2) / (w * w * w) + h0
-        return np.array([(lon - lon0) * rn * math.cos(lat0), (lat - lat0) * rm, h - h0])
+        dlon = (lon - lon0 + math.pi) % (2.0 * math.pi) - math.pi      # across ±180° too
+        return np.array([dlon * rn * math.cos(lat0), (lat - lat0) * rm, h - h0])
     rm, rn = radii(lat0, h0, ellipsoid)
-    return np.stack(np.broadcast_arrays((np.asarray(lon) - lon0) * rn * np.cos(lat0),
+    dlon = np.mod(np.asarray(lon) - lon0 + np.pi, 2.0 * np.pi) - np.pi
+    return np.stack(np.broadcast_arrays(dlon * rn * np.cos(lat0),
                                         (np.asarray(lat) - lat0) * rm,
                                         np.asarray(h) - h0), axis=-1)
 
