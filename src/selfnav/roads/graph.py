@@ -30,6 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from selfnav.errors import InputError
+from selfnav.roads.grid import SegmentGrid, grid_candidates
 
 #: ``highway=*`` values a car may drive on.
 DRIVABLE = frozenset({
@@ -153,6 +154,12 @@ class Candidates:
         """A subset (boolean mask or index array)."""
         return Candidates(self.query[idx], self.seg[idx], self.along[idx], self.cross[idx],
                           self.dist[idx], self.foot[idx])
+
+
+def _concat(c1: Candidates, c2: Candidates) -> Candidates:
+    return Candidates(*(np.concatenate([a, b]) for a, b in zip(
+        (c1.query, c1.seg, c1.along, c1.cross, c1.dist, c1.foot),
+        (c2.query, c2.seg, c2.along, c2.cross, c2.dist, c2.foot))))
 
 
 def project_points_to_segments(p, a, b):
@@ -283,7 +290,10 @@ class RoadGraph:
         self.seg_twin = np.array([key.get((v, u), -1) for u, v in
                                   zip(self.seg_u.tolist(), self.seg_v.tolist())], np.int64)
         self._way_codes, self._seg_way_code = np.unique(self.seg_way, return_inverse=True)
+        self._way_dir_key = (self._seg_way_code * 2
+                             + (self.seg_u < self.seg_v)).astype(np.int64)
         self._tree = None
+        self._grid = None
         self._nx = None
         self._csr = None
 
@@ -430,26 +440,32 @@ class RoadGraph:
         n = len(xy)
         if self.n_segments == 0:
             raise InputError(self.name, "the road graph is empty: no drivable roads")
-        import shapely
-
-        pts = shapely.points(xy)
-        qi, si = self.tree.query(pts, predicate="dwithin", distance=radius)
-        cand = self._make(xy, qi, si)
-        if heading is not None and heading_tol is not None:
-            h = np.asarray(heading, float)[cand.query]
-            dh = np.abs((self.seg_heading[cand.seg] - h + np.pi) % (2 * np.pi) - np.pi)
-            cand = cand.take(np.isnan(h) | (dh <= heading_tol))
-        cand = self._prune(cand, k, per_way)
+        if per_way:
+            key, n_keys = self._way_dir_key, 2 * len(self._way_codes)
+        else:
+            key, n_keys = np.arange(self.n_segments, dtype=np.int64), self.n_segments
+        cand = Candidates(*grid_candidates(self.grid, xy, radius, k, key, n_keys, heading,
+                                           heading_tol, self.seg_heading))
         if min_candidates > 0:
             cnt = np.bincount(cand.query, minlength=n)
             few = np.flatnonzero(cnt < min_candidates)
             if len(few):
                 extra = self._nearest_k(xy, few, min_candidates)
-                both = Candidates(*(np.concatenate([a, b]) for a, b in zip(
-                    (cand.query, cand.seg, cand.along, cand.cross, cand.dist, cand.foot),
-                    (extra.query, extra.seg, extra.along, extra.cross, extra.dist, extra.foot))))
-                cand = self._prune(both, k, per_way)
+                is_few = np.zeros(n, bool)
+                is_few[few] = True
+                sel = is_few[cand.query]
+                fixed = self._prune(_concat(cand.take(sel), extra), k, per_way)
+                both = _concat(cand.take(~sel), fixed)
+                cand = both.take(np.argsort(both.query, kind="stable"))
         return cand
+
+    @property
+    def grid(self) -> SegmentGrid:
+        """Uniform grid over the directed segments (:mod:`selfnav.roads.grid`), built on first
+        use: the index of the candidate search."""
+        if self._grid is None:
+            self._grid = SegmentGrid(self.xy[self.seg_u], self.xy[self.seg_v])
+        return self._grid
 
     def _make(self, xy, qi, si) -> Candidates:
         qi = np.asarray(qi, np.int64)
