@@ -37,3 +37,7 @@ class InputError(SelfnavError):
 
 class NotAtRestError(SelfnavError):
     """Data that a static method cannot use because the unit was moving."""
+
+
+class SelfnavWarning(UserWarning):
+    """A condition the user should know about; the CLI prints it as one line."""

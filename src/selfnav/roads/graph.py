@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from selfnav.errors import InputError
-from selfnav.roads.grid import SegmentGrid, grid_candidates
+from selfnav.roads.grid import SegmentGrid, grid_candidates, nearest_distance
 
 #: ``highway=*`` values a car may drive on.
 DRIVABLE = frozenset({
@@ -418,7 +418,7 @@ class RoadGraph:
         Parameters
         ----------
         xy : (N, 2) local metres
-        radius : float
+        radius : float or (N,)
             Search radius, m.
         k : int, optional
             Keep at most the ``k`` nearest per point.
@@ -450,12 +450,14 @@ class RoadGraph:
             cnt = np.bincount(cand.query, minlength=n)
             few = np.flatnonzero(cnt < min_candidates)
             if len(few):
-                extra = self._nearest_k(xy, few, min_candidates)
+                # the nearest road whatever the distance, and whatever lies within 30 m more
+                r_few = np.broadcast_to(np.asarray(radius, float), (n,))[few]
+                d1 = nearest_distance(self.grid, xy[few], 2 * float(r_few.max()))
+                q, *rest = grid_candidates(self.grid, xy[few], np.maximum(r_few, d1 + 30.0), k,
+                                           key, n_keys)
                 is_few = np.zeros(n, bool)
                 is_few[few] = True
-                sel = is_few[cand.query]
-                fixed = self._prune(_concat(cand.take(sel), extra), k, per_way)
-                both = _concat(cand.take(~sel), fixed)
+                both = _concat(cand.take(~is_few[cand.query]), Candidates(few[q], *rest))
                 cand = both.take(np.argsort(both.query, kind="stable"))
         return cand
 
@@ -466,46 +468,6 @@ class RoadGraph:
         if self._grid is None:
             self._grid = SegmentGrid(self.xy[self.seg_u], self.xy[self.seg_v])
         return self._grid
-
-    def _make(self, xy, qi, si) -> Candidates:
-        qi = np.asarray(qi, np.int64)
-        si = np.asarray(si, np.int64)
-        s, c, d, f = project_points_to_segments(xy[qi], self.xy[self.seg_u[si]],
-                                                self.xy[self.seg_v[si]])
-        return Candidates(qi, si, s, c, d, f)
-
-    def _prune(self, cand: Candidates, k, per_way) -> Candidates:
-        order = np.lexsort((cand.seg, cand.dist, cand.query))
-        cand = cand.take(order)
-        if per_way and len(cand):
-            key = (cand.query * (len(self._way_codes) + 1) + self._seg_way_code[cand.seg]) * 2 \
-                + (self.seg_u[cand.seg] < self.seg_v[cand.seg])
-            _, first = np.unique(key, return_index=True)
-            cand = cand.take(np.sort(first))   # sorted order is kept: nearest per way first
-        if k is not None and len(cand):
-            start = np.searchsorted(cand.query, cand.query, side="left")
-            rank = np.arange(len(cand)) - start
-            cand = cand.take(rank < k)
-        # a segment found twice for the same point (duplicate queries) is kept once
-        if len(cand):
-            dup = np.zeros(len(cand), bool)
-            dup[1:] = (cand.query[1:] == cand.query[:-1]) & (cand.seg[1:] == cand.seg[:-1])
-            cand = cand.take(~dup)
-        return cand
-
-    def _nearest_k(self, xy, idx, k) -> Candidates:
-        """The ``k`` nearest segments (by exact distance) for the points ``idx``."""
-        import shapely
-
-        qi, si = self.tree.query_nearest(shapely.points(xy[idx]), all_matches=True)
-        qi = idx[np.asarray(qi, np.int64)]
-        base = self._make(xy, qi, np.asarray(si, np.int64))
-        # widen to everything within the nearest distance + a margin so that k can be met
-        dmax = np.zeros(len(xy))
-        np.maximum.at(dmax, base.query, base.dist)
-        q2, s2 = self.tree.query(shapely.points(xy[idx]), predicate="dwithin",
-                                 distance=float(dmax[idx].max()) + 30.0)
-        return self._make(xy, idx[np.asarray(q2, np.int64)], np.asarray(s2, np.int64))
 
     def nearest_segments(self, xy, radius=50.0, k=4, heading=None, heading_tol=None):
         """Alias of :meth:`candidates` with ``per_way=False`` (all nearby directed segments)."""

@@ -42,6 +42,22 @@ class SegmentGrid:
         iy1 = ((hi[:, 1] - self.y0) // cell).astype(np.int64)
         self.start, self.items = _fill(ix0, iy0, ix1, iy1, self.nx, self.ny)
         self.a, self.b = a, b
+        self._scratch = {}
+        self._stamp = 0
+
+    def scratch(self, n_keys):
+        """Scratch arrays of the query kernel and the stamp to start from (so that nothing of
+        the size of the map is allocated or cleared per query)."""
+        s = self._scratch.get(n_keys)
+        if s is None:
+            s = self._scratch[n_keys] = (np.full(len(self.a), -1, np.int64),
+                                         np.full(n_keys, -1, np.int64),
+                                         np.full(n_keys, -1, np.int64))
+        return (*s, self._stamp)
+
+    def advance(self, n):
+        """Move the stamp past ``n`` points just queried."""
+        self._stamp += n + 1
 
 
 @numba.njit(cache=True)
@@ -64,15 +80,13 @@ def _fill(ix0, iy0, ix1, iy1, nx, ny):  # pragma: no cover - numba
 
 
 @numba.njit(cache=True)
-def _query(xy, p0, radius, k, key, n_keys, heading, heading_tol, seg_heading, x0, y0, cell,
-           nx, ny, start, items, a, b, out_q, out_s, out_along, out_cross, out_dist,
-           out_foot, pos):  # pragma: no cover - numba
+def _query(xy, p0, radii, k, key, heading, heading_tol, seg_heading, x0, y0, cell,
+           nx, ny, start, items, a, b, seen, key_stamp, key_best, stamp0, out_q, out_s,
+           out_along, out_cross, out_dist, out_foot, pos):  # pragma: no cover - numba
     """Candidates of points ``p0 ..``: appended to ``out_*`` from ``pos``. Returns
-    ``(next point, pos)``; stops early when the output is full."""
+    ``(next point, pos)``; stops early when the output is full. ``seen``, ``key_stamp`` and
+    ``key_best`` are scratch arrays (stamped with ``stamp0 + point``, never reset)."""
     n = len(xy)
-    seen = np.full(len(a), -1, np.int64)
-    key_best = np.full(n_keys, -1, np.int64)
-    key_stamp = np.full(n_keys, -1, np.int64)
     buf_s = np.empty(256, np.int64)
     buf_d = np.empty(256)
     buf_al = np.empty(256)
@@ -81,8 +95,10 @@ def _query(xy, p0, radius, k, key, n_keys, heading, heading_tol, seg_heading, x0
     buf_fy = np.empty(256)
     keys = np.empty(256, np.int64)
     cap = len(out_q)
-    r2 = radius * radius
     for q in range(p0, n):
+        stamp = stamp0 + q
+        radius = radii[q]
+        r2 = radius * radius
         px, py = xy[q, 0], xy[q, 1]
         cx0 = max(0, int(np.floor((px - radius - x0) / cell)))
         cx1 = min(nx - 1, int(np.floor((px + radius - x0) / cell)))
@@ -96,9 +112,9 @@ def _query(xy, p0, radius, k, key, n_keys, heading, heading_tol, seg_heading, x0
                 c = cy * nx + cx
                 for e in range(start[c], start[c + 1]):
                     s = items[e]
-                    if seen[s] == q:
+                    if seen[s] == stamp:
                         continue
-                    seen[s] = q
+                    seen[s] = stamp
                     ax, ay = a[s, 0], a[s, 1]
                     dx, dy = b[s, 0] - ax, b[s, 1] - ay
                     L = np.hypot(dx, dy)
@@ -131,8 +147,8 @@ def _query(xy, p0, radius, k, key, n_keys, heading, heading_tol, seg_heading, x0
                     buf_fx[m] = fx
                     buf_fy[m] = fy
                     kk = key[s]
-                    if key_stamp[kk] != q:
-                        key_stamp[kk] = q
+                    if key_stamp[kk] != stamp:
+                        key_stamp[kk] = stamp
                         key_best[kk] = m
                         keys[nk] = kk
                         nk += 1
@@ -178,14 +194,15 @@ def _query(xy, p0, radius, k, key, n_keys, heading, heading_tol, seg_heading, x0
 
 def grid_candidates(grid: SegmentGrid, xy, radius, k, key, n_keys, heading=None,
                     heading_tol=None, seg_heading=None):
-    """Segments within ``radius`` of each point: the nearest per ``key`` and of those the ``k``
-    nearest, ordered by point then (distance, segment).
+    """Segments within ``radius`` (scalar or one per point) of each point: the nearest per
+    ``key`` and of those the ``k`` nearest, ordered by point then (distance, segment).
 
     Returns ``(query, seg, along, cross, dist, foot)`` arrays (``cross`` positive to the left of
     the segment's direction).
     """
     xy = np.ascontiguousarray(np.atleast_2d(np.asarray(xy, float)))
     n = len(xy)
+    radii = np.ascontiguousarray(np.broadcast_to(np.asarray(radius, float), (n,)))
     k = int(k) if k is not None else len(grid.a)
     if heading is None or heading_tol is None:
         heading = np.full(n, np.nan)
@@ -199,12 +216,29 @@ def grid_candidates(grid: SegmentGrid, xy, radius, k, key, n_keys, heading=None,
            np.empty(cap), np.empty((cap, 2))]
     p, pos = 0, 0
     while True:
-        p, pos = _query(xy, p, float(radius), k, key, n_keys, heading, tol, seg_heading,
-                        grid.x0, grid.y0, grid.cell, grid.nx, grid.ny, grid.start, grid.items,
-                        grid.a, grid.b, *out, pos)
+        scratch = grid.scratch(n_keys)       # fresh stamps for every call (a resumed point
+        grid.advance(n)                      # starts over)
+        p, pos = _query(xy, p, radii, k, key, heading, tol, seg_heading, grid.x0, grid.y0,
+                        grid.cell, grid.nx, grid.ny, grid.start, grid.items, grid.a, grid.b,
+                        *scratch, out[0], out[1], out[2], out[3], out[4], out[5], pos)
         if p >= n:
             break
         cap = max(2 * cap, pos + min(k, len(grid.a)))
         out = [np.concatenate([o[:pos], np.empty((cap - pos,) + o.shape[1:], o.dtype)])
                for o in out]
     return tuple(o[:pos] for o in out)
+
+
+def nearest_distance(grid: SegmentGrid, xy, start_radius=50.0):
+    """Distance from each point to its nearest segment (rings of growing radius)."""
+    xy = np.atleast_2d(np.asarray(xy, float))
+    out = np.full(len(xy), np.inf)
+    todo = np.arange(len(xy))
+    r = float(start_radius)
+    key = np.arange(len(grid.a), dtype=np.int64)
+    while len(todo):
+        q, _, _, _, d, _ = grid_candidates(grid, xy[todo], r, 1, key, len(key))
+        out[todo[q]] = d
+        todo = todo[~np.isin(np.arange(len(todo)), q)]
+        r *= 2.0
+    return out

@@ -62,6 +62,8 @@ class MatchResult:
         Processing time.
     way : (N,) int64
         OpenStreetMap way id of the matched segment.
+    sigma : float
+        The GNSS σ the track was matched with where its fixes give none, m.
     """
 
     t: np.ndarray
@@ -75,6 +77,7 @@ class MatchResult:
     restart: np.ndarray
     seconds: float = 0.0
     way: np.ndarray | None = None
+    sigma: float = float("nan")
 
     def summary(self) -> dict:
         n = len(self.t)
@@ -137,9 +140,11 @@ def transition_route_distance(graph: RoadGraph, cand: Candidates, i, j, *, backt
 
 @numba.njit(cache=True)
 def _forward(a, b, off, seg, along, foot, em, d_gc, dt, lim, fastest, seg_u, seg_v, seg_len,
-             cache_arrays, beta, backtrack, max_gap, score, back, restart):  # pragma: no cover
+             cache_arrays, beta, backtrack, max_gap, score, back, restart, scratch,
+             stamp0):  # pragma: no cover
     """Viterbi forward recursion over the transitions ``a -> a+1 ... b-1 -> b`` (epoch ``a``
     already scored), transitions computed on the fly: nothing of size (pairs) is stored.
+    ``beta`` and ``backtrack`` are per fix (tracks of different σ matched together).
 
     The route distance of a transition (the scalar form of :func:`transition_route_distance`,
     forward gap cut at ``lim``): the end node of each candidate segment of epoch ``t`` is a
@@ -150,11 +155,7 @@ def _forward(a, b, off, seg, along, foot, em, d_gc, dt, lim, fastest, seg_u, seg
     (same result, less work). ``score`` is kept near 0 (the best of each epoch is subtracted);
     an epoch that no transition reaches restarts the chain from its emissions."""
     row_of, row_start, row_len, pool_node, pool_dist = cache_arrays
-    n_nodes = len(row_of)
-    tgt_stamp = np.full(n_nodes, -1, np.int64)
-    tgt_slot = np.zeros(n_nodes, np.int64)
-    src_stamp = np.full(n_nodes, -1, np.int64)
-    src_slot = np.zeros(n_nodes, np.int64)
+    tgt_stamp, tgt_slot, src_stamp, src_slot = scratch   # node-sized, stamped, never reset
     kmax = 1
     for t in range(a, b + 1):
         kmax = max(kmax, off[t + 1] - off[t])
@@ -162,6 +163,9 @@ def _forward(a, b, off, seg, along, foot, em, d_gc, dt, lim, fastest, seg_u, seg
     for t in range(a, b):
         i0, i1 = off[t], off[t + 1]
         j0, j1 = off[t + 1], off[t + 2]
+        stamp = stamp0 + t
+        b_t = beta[t]
+        bt = backtrack[t + 1]
         for j in range(j0, j1):
             score[j] = -np.inf
             back[j] = -1
@@ -169,8 +173,8 @@ def _forward(a, b, off, seg, along, foot, em, d_gc, dt, lim, fastest, seg_u, seg
             n_tgt = 0
             for j in range(j0, j1):
                 u = seg_u[seg[j]]
-                if tgt_stamp[u] != t:
-                    tgt_stamp[u] = t
+                if tgt_stamp[u] != stamp:
+                    tgt_stamp[u] = stamp
                     tgt_slot[u] = n_tgt
                     n_tgt += 1
             n_src = 0
@@ -181,8 +185,8 @@ def _forward(a, b, off, seg, along, foot, em, d_gc, dt, lim, fastest, seg_u, seg
                 si, ai = seg[i], along[i]
                 rest_i = seg_len[si] - ai
                 v_i = seg_v[si]
-                if src_stamp[v_i] != t:          # scan this source's row once per epoch
-                    src_stamp[v_i] = t
+                if src_stamp[v_i] != stamp:      # scan this source's row once per epoch
+                    src_stamp[v_i] = stamp
                     src_slot[v_i] = n_src
                     for m in range(n_tgt):
                         gap[n_src, m] = np.inf
@@ -192,35 +196,34 @@ def _forward(a, b, off, seg, along, foot, em, d_gc, dt, lim, fastest, seg_u, seg
                         if pool_dist[e] > lim[t] or found == n_tgt:
                             break
                         w = pool_node[e]
-                        if tgt_stamp[w] == t:
+                        if tgt_stamp[w] == stamp:
                             gap[n_src, tgt_slot[w]] = pool_dist[e]
                             found += 1
                     n_src += 1
                 row = src_slot[v_i]
                 for j in range(j0, j1):
                     excess = np.hypot(foot[j, 0] - foot[i, 0], foot[j, 1] - foot[i, 1]) - d_gc[t]
-                    if excess > 0 and s_i - excess / beta <= score[j]:
+                    if excess > 0 and s_i - excess / b_t <= score[j]:
                         continue
                     sj, aj = seg[j], along[j]
                     if si == sj and aj >= ai:
                         d = aj - ai
                     else:
                         d = rest_i + gap[row, tgt_slot[seg_u[sj]]] + aj
-                    if backtrack > 0:            # backwards jitter on a slow or stopped car
+                    if bt > 0:                   # backwards jitter on a slow or stopped car
                         if si == sj and aj < ai:
                             db = ai - aj
                         else:
                             rest = (seg_len[sj] - aj) + ai
                             db = np.inf
-                            if rest <= backtrack:
+                            if rest <= bt:
                                 db = rest + route_gap(row_of, row_start, row_len, pool_node,
-                                                      pool_dist, seg_v[sj], seg_u[si],
-                                                      backtrack - rest)
-                        if db <= backtrack and db < d:
+                                                      pool_dist, seg_v[sj], seg_u[si], bt - rest)
+                        if db <= bt and db < d:
                             d = db
                     if not d <= fastest[t]:
                         continue
-                    v = s_i - abs(d - d_gc[t]) / beta
+                    v = s_i - abs(d - d_gc[t]) / b_t
                     if v > score[j]:
                         score[j] = v
                         back[j] = i
@@ -269,7 +272,8 @@ class HmmMatcher:
     ----------
     graph : RoadGraph
     sigma : float
-        GNSS horizontal σ (m) where the fixes do not give one.
+        GNSS horizontal σ (m) where the fixes do not give one (:meth:`estimate_sigma` estimates
+        it from a track, :meth:`with_sigma` gives the matcher for it).
     beta : float, optional
         Transition scale (m); default ``max(3, sigma/2)``: with noisy fixes the straight-line
         distance between two fixes is itself uncertain by ~σ√2.
@@ -307,27 +311,66 @@ class HmmMatcher:
                  backtrack=None, max_speed=60.0, max_gap=120.0, window=4096,
                  cache: RouteCache | None = None):
         self.graph = graph
-        self.sigma = float(sigma)
-        self.beta = float(beta) if beta is not None else max(3.0, 0.5 * self.sigma)
-        self.radius = float(radius) if radius is not None else float(np.clip(4 * self.sigma,
-                                                                              30.0, 200.0))
+        self._given = {"beta": beta, "radius": radius, "backtrack": backtrack}
+        self._set_sigma(sigma)
         self.k = int(k)
-        self.backtrack = float(backtrack) if backtrack is not None else max(15.0, 3 * self.sigma)
         self.max_speed = float(max_speed)
         self.max_gap = float(max_gap)
         self.window = int(window)
         self.cache = cache if cache is not None else RouteCache(graph)
+        nn = graph.n_nodes
+        self._scratch = (np.full(nn, -1, np.int64), np.zeros(nn, np.int64),
+                         np.full(nn, -1, np.int64), np.zeros(nn, np.int64))
+        self._stamp = [0]                   # shared with the copies of with_sigma
         self._g = (np.asarray(graph.seg_u, np.int64), np.asarray(graph.seg_v, np.int64),
                    np.asarray(graph.seg_len, float))
 
-    def _candidates(self, xy):
+    def _set_sigma(self, sigma):
+        self.sigma = float(sigma)
+        beta, radius, backtrack = (self._given[k] for k in ("beta", "radius", "backtrack"))
+        self.beta = float(beta) if beta is not None else max(3.0, 0.5 * self.sigma)
+        self.radius = float(radius) if radius is not None else float(np.clip(4 * self.sigma,
+                                                                              30.0, 200.0))
+        self.backtrack = float(backtrack) if backtrack is not None else max(15.0, 3 * self.sigma)
+
+    def with_sigma(self, sigma) -> "HmmMatcher":
+        """The same matcher (graph, route store, settings given explicitly) for another GNSS σ:
+        the defaults that follow σ (β, radius, backtrack) follow it."""
+        import copy
+
+        m = copy.copy(self)
+        m._set_sigma(sigma)
+        return m
+
+    def estimate_sigma(self, xy) -> float:
+        """GNSS σ of a track from its fixes: ``1.4826 × median`` distance to the nearest road
+        (Newson & Krumm 2009, §4.1: the median absolute deviation of a Gaussian), within
+        [5, 50] m and rounded to 0.5 m. In a dense network the nearest road is not always the
+        driven one, so this leans low."""
+        return self.estimate_sigmas([xy])[0]
+
+    def estimate_sigmas(self, tracks_xy) -> list:
+        """:meth:`estimate_sigma` of several tracks (local metres) in one search."""
+        sizes = [len(np.atleast_2d(x)) for x in tracks_xy]
+        xy = np.concatenate([np.atleast_2d(np.asarray(x, float)).reshape(-1, 2)
+                             for x in tracks_xy])
+        c = self.graph.candidates(xy, 100.0, k=1, min_candidates=1, per_way=False)
+        d = np.full(len(xy), np.nan)
+        d[c.query] = c.dist
+        out = []
+        for a, b in zip(np.cumsum([0] + sizes[:-1]), np.cumsum(sizes)):
+            s = 1.4826 * float(np.nanmedian(d[a:b])) if b > a else self.sigma
+            out.append(float(np.clip(np.round(2 * s) / 2, 5.0, 50.0)))
+        return out
+
+    def _candidates(self, xy, radius):
         """Candidates of all fixes, searched window by window: ``(off, seg, along, dist, foot)``."""
         n = len(xy)
         offs, segs, alongs, dists, feet = [np.zeros(1, np.int64)], [], [], [], []
         total = 0
         for a in range(0, n, self.window):
-            c = self.graph.candidates(xy[a:a + self.window], self.radius, k=self.k,
-                                      min_candidates=1, per_way=True)
+            c = self.graph.candidates(xy[a:a + self.window], radius[a:a + self.window],
+                                      k=self.k, min_candidates=1, per_way=True)
             offs.append(c.offsets(len(xy[a:a + self.window]))[1:] + total)
             total += len(c)
             segs.append(c.seg)
@@ -339,20 +382,52 @@ class HmmMatcher:
 
     def match(self, t, xy, sigma=None) -> MatchResult:
         """Match fixes given in local metres of the graph; see :class:`MatchResult`."""
+        return self.match_many([(t, xy, sigma)])[0]
+
+    def match_many(self, tracks, track_sigma=None) -> list:
+        """Match several tracks in one pass (one candidate search, one route-store update, one
+        Viterbi run with a restart at each track's first fix): the fixed costs of a call are
+        paid once, which is what makes short fleet tracks fast.
+
+        Parameters
+        ----------
+        tracks : list of (t, xy, sigma)
+            Times (s), local positions (m) and per-fix σ (or None) of each track.
+        track_sigma : list of float, optional
+            σ of each track where its fixes give none (default the matcher's); β, the search
+            radius and the backtrack follow it unless given explicitly.
+
+        Returns
+        -------
+        list of MatchResult
+        """
         t0 = time.perf_counter()
-        t = np.asarray(t, float)
-        xy = np.atleast_2d(np.asarray(xy, float))
-        n = len(t)
         g = self.graph
-        sig = np.full(n, self.sigma) if sigma is None else np.where(
-            np.isfinite(sigma) & (np.asarray(sigma, float) > 0), sigma, self.sigma)
-        off, seg, along, dist, foot = self._candidates(xy)
+        sizes = [len(np.asarray(tr[0])) for tr in tracks]
+        n = int(sum(sizes))
+        bounds = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
+        ts = np.concatenate([np.asarray(tr[0], float) for tr in tracks])
+        xy = np.concatenate([np.atleast_2d(np.asarray(tr[1], float)).reshape(-1, 2)
+                             for tr in tracks])
+        track_sigma = [self.sigma] * len(tracks) if track_sigma is None else track_sigma
+        per = [self.with_sigma(s) if s != self.sigma else self for s in track_sigma]
+        sig = np.empty(n)
+        for m, (a, b), tr in zip(per, zip(bounds[:-1], bounds[1:]), tracks):
+            given = None if tr[2] is None else np.asarray(tr[2], float)
+            sig[a:b] = m.sigma if given is None else np.where(
+                np.isfinite(given) & (given > 0), given, m.sigma)
+        radius = np.repeat([m.radius for m in per], sizes)
+        beta = np.repeat([m.beta for m in per], sizes)
+        backtrack = np.repeat([m.backtrack for m in per], sizes)
+        off, seg, along, dist, foot = self._candidates(xy, radius)
         query = np.repeat(np.arange(n), np.diff(off))
         em = -0.5 * (dist / sig[query]) ** 2
         d_gc = np.hypot(*(xy[1:] - xy[:-1]).T)
-        dt = np.diff(t)
-        fastest = self.max_speed * np.minimum(dt, self.max_gap) + 2 * self.radius
-        lim = np.minimum(d_gc + 2 * self.radius + 20 * self.beta, fastest)
+        dt = np.diff(ts)
+        dt[bounds[1:-1] - 1] = np.inf          # a new track: no transition, the chain restarts
+        r_ep = np.maximum(radius[1:], radius[:-1]) if n > 1 else np.zeros(0)
+        fastest = self.max_speed * np.minimum(dt, self.max_gap) + 2 * r_ep
+        lim = np.minimum(d_gc + 2 * r_ep + 20 * beta[:-1], fastest)
         score = np.empty(len(seg))
         back = np.full(len(seg), -1, np.int64)
         restart = np.zeros(n, bool)
@@ -361,20 +436,30 @@ class HmmMatcher:
         seg_u, seg_v, seg_len = self._g
         for a in range(0, n - 1, self.window):
             b = min(a + self.window, n - 1)
-            c0, c1 = off[a], off[b]           # sources: candidates of epochs a .. b-1
-            self.cache.ensure(np.concatenate([seg_v[seg[c0:c1]], seg_v[seg[off[a + 1]:off[b + 1]]]]),
-                              np.concatenate([np.repeat(lim[a:b], np.diff(off[a:b + 1])),
-                                              np.full(off[b + 1] - off[a + 1], self.backtrack)]))
-            _forward(a, b, off, seg, along, foot, em, d_gc, dt, lim, fastest, seg_u, seg_v, seg_len,
-                     self.cache.arrays, self.beta, self.backtrack, self.max_gap, score, back,
-                     restart)
+            # sources: candidates of epochs a .. b-1 (forward) and a+1 .. b (backwards)
+            self.cache.ensure(
+                np.concatenate([seg_v[seg[off[a]:off[b]]], seg_v[seg[off[a + 1]:off[b + 1]]]]),
+                np.concatenate([np.repeat(lim[a:b], np.diff(off[a:b + 1])),
+                                np.repeat(backtrack[a + 1:b + 1], np.diff(off[a + 1:b + 2]))]))
+            _forward(a, b, off, seg, along, foot, em, d_gc, dt, lim, fastest, seg_u, seg_v,
+                     seg_len, self.cache.arrays, beta, backtrack, self.max_gap, score, back,
+                     restart, self._scratch, self._stamp[0])
+        self._stamp[0] += n + 1
         path = _backtrack(off, score, back)
         mseg, malong = seg[path], along[path]
         foot = foot[path]
         lat, lon = g.to_geodetic(foot[:, 0], foot[:, 1])
-        in_radius = np.bincount(query[dist <= self.radius], minlength=n) > 0
-        return MatchResult(t, foot, lat, lon, mseg, malong, dist[path], in_radius, restart,
-                           time.perf_counter() - t0, g.seg_way[mseg])
+        in_radius = np.bincount(query[dist <= radius[query]], minlength=n) > 0
+        way = g.seg_way[mseg]
+        moved = dist[path]
+        seconds = time.perf_counter() - t0
+        out = []
+        for m, a, b in zip(per, bounds[:-1], bounds[1:]):
+            sl = slice(a, b)
+            out.append(MatchResult(ts[sl], foot[sl], lat[sl], lon[sl], mseg[sl], malong[sl],
+                                   moved[sl], in_radius[sl], restart[sl],
+                                   seconds * (b - a) / max(n, 1), way[sl], m.sigma))
+        return out
 
     def match_geodetic(self, t, lat, lon, sigma=None) -> MatchResult:
         """Match fixes given as WGS-84 latitude and longitude (rad)."""

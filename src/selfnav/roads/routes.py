@@ -303,3 +303,87 @@ def route_nodes(graph: RoadGraph, src, dst, limit=np.inf):
                 path.append(v)
             out[k] = path[::-1]
     return out
+
+
+def segment_lookup(graph: RoadGraph):
+    """``f(u, v) -> segment index`` for node pairs that are directed segments (the shortest
+    when two segments join the same nodes, as in :attr:`RoadGraph.csr`); -1 otherwise."""
+    n = graph.n_nodes
+    order = np.lexsort((graph.seg_len, graph.seg_v, graph.seg_u))
+    key = graph.seg_u[order] * n + graph.seg_v[order]
+    first = np.ones(len(key), bool)
+    first[1:] = key[1:] != key[:-1]
+    key, seg = key[first], order[first]
+
+    def lookup(u, v):
+        q = np.asarray(u, np.int64) * n + np.asarray(v, np.int64)
+        k = np.clip(np.searchsorted(key, q), 0, max(len(key) - 1, 0))
+        return np.where(key[k] == q, seg[k], -1)
+
+    return lookup
+
+
+def driven_route(graph: RoadGraph, seg, along, foot, restart, *, backtrack=15.0):
+    """The route a matched track drove, through the road graph between consecutive matches.
+
+    Parameters
+    ----------
+    seg, along, foot : (N,), (N,), (N, 2)
+        Matched segment, offset along it and position (local metres) of each fix.
+    restart : (N,) bool
+        Where the chain restarted (the route is broken there).
+    backtrack : float
+        A move backwards up to this length (m) is noise on a slow or stopped vehicle, not a
+        drive round the block (as in the matcher).
+
+    Returns
+    -------
+    list of (xy (M, 2) m, segments (S,) int)
+        One piece per unbroken run of the chain: its polyline and the directed segments it
+        drives, in order.
+    """
+    seg = np.asarray(seg, np.int64)
+    n = len(seg)
+    forward, src, dst = [], [], []
+    for k in range(1, n):
+        if restart[k]:
+            continue
+        si, sj = seg[k - 1], seg[k]
+        if si == sj:
+            continue
+        if (graph.seg_len[sj] - along[k]) + along[k - 1] <= backtrack:
+            back = node_distances(graph, [graph.seg_v[sj]], [graph.seg_u[si]], backtrack)[0]
+            if (graph.seg_len[sj] - along[k]) + back + along[k - 1] <= backtrack:
+                continue                     # jitter backwards: the vehicle did not drive on
+        forward.append(k)
+        src.append(graph.seg_v[si])
+        dst.append(graph.seg_u[sj])
+    paths = dict(zip(forward, route_nodes(graph, src, dst))) if forward else {}
+    seg_of = segment_lookup(graph)
+    pieces = []
+    pts, segs = [], []
+    for k in range(n):
+        if restart[k] or k == 0:
+            if len(pts) > 1:
+                pieces.append((np.asarray(pts), np.asarray(segs, np.int64)))
+            pts, segs = [foot[k]], [seg[k]]
+            continue
+        if seg[k] == seg[k - 1]:
+            if along[k] >= along[k - 1]:
+                pts.append(foot[k])
+            continue
+        if k not in paths:
+            continue
+        nodes = paths[k]
+        if not nodes:                        # no route: break the piece here
+            if len(pts) > 1:
+                pieces.append((np.asarray(pts), np.asarray(segs, np.int64)))
+            pts, segs = [foot[k]], [seg[k]]
+            continue
+        pts += list(graph.xy[nodes])
+        pts.append(foot[k])
+        segs += list(seg_of(nodes[:-1], nodes[1:]))
+        segs.append(seg[k])
+    if len(pts) > 1:
+        pieces.append((np.asarray(pts), np.asarray(segs, np.int64)))
+    return pieces
