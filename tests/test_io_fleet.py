@@ -127,3 +127,19 @@ def test_native_gnss_csv_takes_iso_times_repeats_and_unsorted_rows(tmp_path):
                  "a,1,60,26,1\nb,0,60,26,1\nb,1,60,26,1\n")
     with pytest.raises(InputError, match="2 tracks"):
         read_gnss_csv(two)
+
+
+def test_common_spellings_and_a_row_id_column(tmp_path):
+    p = _write(tmp_path / "grab.csv", "id,trj_id,pingtimestamp,rawlat,rawlng\n"
+               "1,7,1552293204,60.1,26.9\n2,7,1552293209,60.1,26.91\n"
+               "3,8,1552293204,60.2,26.9\n4,8,1552293214,60.2,26.91\n")
+    fleet, notes = _notes(lambda: read_fleet(p))
+    assert [tr.track_id for tr in fleet.tracks] == ["7", "8"]
+    assert any("'trj_id' as track_id" in n and "'rawlat' as lat_deg" in n for n in notes)
+    rows = _write(tmp_path / "rows.csv", "ID,Time Stamp,Latitude,Longitude\n"
+                  "1,0,60.1,26.9\n2,5,60.1,26.91\n3,9,60.1,26.92\n")
+    fleet = read_fleet(rows)                    # unique ids number the rows: one track
+    assert len(fleet.tracks) == 1 and len(fleet.tracks[0].gnss) == 3
+    veh = _write(tmp_path / "veh.csv", "id,timestamp,lat,lon\n"
+                 "a,0,60.1,26.9\na,5,60.1,26.91\nb,0,60.2,26.9\nb,5,60.2,26.91\n")
+    assert [tr.track_id for tr in read_fleet(veh).tracks] == ["a", "b"]   # ids that repeat

@@ -231,7 +231,7 @@ def _brute_candidates(g, xy, radius, k, per_way):
     out = []
     a, b = g.xy[g.seg_u], g.xy[g.seg_v]
     for q, p in enumerate(xy):
-        s, c, d, f = project_points_to_segments(np.broadcast_to(p, a.shape), a, b)
+        _, _, d, _ = project_points_to_segments(np.broadcast_to(p, a.shape), a, b)
         idx = np.flatnonzero(d <= radius)
         idx = idx[np.lexsort((idx, d[idx]))]
         if per_way:
@@ -242,12 +242,14 @@ def _brute_candidates(g, xy, radius, k, per_way):
     return out
 
 
-@pytest.mark.parametrize("per_way,radius,k", [(True, 40.0, 16), (False, 25.0, 4), (True, 150.0, 50)])
+@pytest.mark.parametrize("per_way,radius,k", [(True, 40.0, 16), (False, 25.0, 4),
+                                              (True, 150.0, 50)])
 def test_grid_candidate_search_agrees_with_brute_force(maps, per_way, radius, k):
     g = maps["helsinki_centre"]
     rng = np.random.default_rng(4)
     x0, y0, x1, y1 = g.bounds()
-    xy = np.column_stack([rng.uniform(x0 - 100, x1 + 100, 150), rng.uniform(y0 - 100, y1 + 100, 150)])
+    xy = np.column_stack([rng.uniform(x0 - 100, x1 + 100, 150),
+                          rng.uniform(y0 - 100, y1 + 100, 150)])
     c = g.candidates(xy, radius, k=k, min_candidates=0, per_way=per_way)
     ref = _brute_candidates(g, xy, radius, k, per_way)
     assert [(q, s) for q, s, _ in ref] == list(zip(c.query.tolist(), c.seg.tolist()))
@@ -259,7 +261,7 @@ def test_a_small_route_store_gives_the_same_match(maps):
     from selfnav.roads.routes import RouteCache
 
     g = maps["helsinki_centre"]
-    traj, route, noisy = floating_car(g, 31, sigma=10.0, duration=1800.0, period=5.0)
+    traj, _, noisy = floating_car(g, 31, sigma=10.0, duration=1800.0, period=5.0)
     ref = HmmMatcher(g, sigma=10.0).match(traj.t, noisy)
     small = RouteCache(g, max_entries=3000)
     res = HmmMatcher(g, sigma=10.0, window=64, cache=small).match(traj.t, noisy)

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import csv
 import io
+import re
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -35,20 +36,25 @@ from selfnav.errors import InputError, SelfnavWarning
 from selfnav.io.csvio import open_text, parse_numbers, parse_times
 from selfnav.types import GnssData
 
-#: schema column -> accepted spellings (lower case), in order of preference
+#: schema column -> accepted spellings, in order of preference (compared lower case, without
+#: spaces, underscores or other punctuation: ``Track ID``, ``track_id`` and ``trackId`` agree)
 ALIASES = {
-    "t": ("t", "timestamp", "time", "datetime", "date_time", "time_utc", "utc_time", "ts",
-          "gps_time", "time_s", "epoch"),
-    "lat_deg": ("lat_deg", "lat", "latitude", "lat_wgs84", "latitude_deg", "lat_dd"),
+    "t": ("t", "timestamp", "time", "datetime", "date_time", "time_utc", "utc_time",
+          "timestamp_utc", "datetime_utc", "time_stamp", "ts", "gps_time", "gpstime",
+          "pingtimestamp", "recorded_at", "time_s", "epoch", "unix_time", "utc"),
+    "lat_deg": ("lat_deg", "lat", "latitude", "lat_wgs84", "latitude_deg", "lat_dd", "rawlat",
+                "gps_lat", "y_lat"),
     "lon_deg": ("lon_deg", "lon", "lng", "long", "longitude", "lon_wgs84", "longitude_deg",
-                "lon_dd"),
+                "lon_dd", "rawlng", "rawlon", "gps_lon", "gps_lng", "x_lon"),
     "h_m": ("h_m", "alt", "altitude", "height", "elevation", "alt_m", "altitude_m", "h"),
     "sigma_m": ("sigma_m",),
-    "track_id": ("track_id", "trip_id", "trajectory_id", "traj_id", "track", "trip",
-                 "vehicle_id", "device_id", "vehicle", "device", "car_id", "taxi_id", "bus_id",
-                 "unit_id"),
+    "track_id": ("track_id", "trip_id", "trajectory_id", "traj_id", "trj_id", "track", "trip",
+                 "trajectory", "vehicle_id", "device_id", "vehicle", "device", "car_id",
+                 "taxi_id", "bus_id", "unit_id", "driver_id", "object_id", "imei"),
     "ve": ("ve",), "vn": ("vn",), "vu": ("vu",),
 }
+#: a column that is a track id only if its values repeat (otherwise it numbers the rows)
+WEAK_TRACK_ID = ("id",)
 FLEET_COLUMNS = ("t", "lat_deg", "lon_deg", "h_m", "sigma_m", "track_id")
 SUFFIXES = (".csv", ".csv.gz", ".txt", ".parquet", ".pq")
 MAX_TRACK_NOTES = 20
@@ -114,31 +120,54 @@ def _note(msg: str) -> None:
 
 
 # ------------------------------------------------------------------ columns
+def _key(name) -> str:
+    return re.sub(r"[^a-z0-9]", "", str(name).strip().strip('"').lower())
+
+
 def _pick_columns(path, names, required, optional):
     """Map schema columns to header positions: ``{schema: (index, header name)}``."""
     index = {}
     for k, n in enumerate(names):
-        index.setdefault(n.strip().strip('"').strip().lower(), k)
+        index.setdefault(_key(n), k)
     found = {}
     for col in (*required, *optional):
         for alias in ALIASES.get(col, (col,)):
-            if alias in index:
-                found[col] = (index[alias], alias)
+            if _key(alias) in index:
+                j = index[_key(alias)]
+                found[col] = (j, str(names[j]).strip())
                 break
+    if "track_id" in optional and "track_id" not in found:
+        for alias in WEAK_TRACK_ID:
+            if alias in index:
+                found["track_id"] = (index[alias], f"{names[index[alias]]}?")
     missing = [c for c in required if c not in found]
     if missing:
         import difflib
 
-        close = difflib.get_close_matches(missing[0], list(index), n=1, cutoff=0.6)
+        close = difflib.get_close_matches(missing[0], [str(n) for n in names], n=1, cutoff=0.6)
         hint = f" (found '{close[0]}': misnamed?)" if close else ""
         raise InputError(path, f"missing column '{missing[0]}'{hint}; the header has: "
-                         f"{', '.join(index)} (the schema: t, lat_deg, lon_deg[, h_m, sigma_m, "
-                         "track_id])")
+                         f"{', '.join(str(n) for n in names)} (the schema: t, lat_deg, lon_deg"
+                         "[, h_m, sigma_m, track_id])")
+    return found
+
+
+def _note_renamed(path, found):
     renamed = {c: a for c, (_, a) in found.items() if a != c}
     if renamed:
         _note(f"{path}: columns read as the schema's: " +
-              ", ".join(f"'{a}' as {c}" for c, a in renamed.items()))
-    return found
+              ", ".join(f"'{a.rstrip('?')}' as {c}" for c, a in renamed.items()))
+
+
+def _weak_track_id(found, cols):
+    """A weak track id column (``id``) is kept only if its values repeat."""
+    if found.get("track_id", (0, ""))[1].endswith("?"):
+        vals = cols["track_id"]
+        if len(set(vals)) > len(vals) / 2:
+            del cols["track_id"], found["track_id"]
+        else:
+            j, name = found["track_id"]
+            found["track_id"] = (j, name[:-1])
 
 
 def _sniff_delimiter(header: str):
@@ -180,6 +209,8 @@ def read_csv_columns(path, required, optional=()):
     cols = {}
     for c, (j, _) in found.items():
         cols[c] = [r[j].strip() if j < len(r) else "" for r in rows]
+    _weak_track_id(found, cols)
+    _note_renamed(path, found)
     return cols, np.asarray(keep, np.int64) + 1
 
 
@@ -206,6 +237,8 @@ def read_parquet_columns(path, required, optional=()):
         else:
             vals = ["" if v is None else str(v) for v in vals]
         cols[c] = vals
+    _weak_track_id(found, cols)
+    _note_renamed(path, found)
     return cols, np.arange(1, tab.num_rows + 1, dtype=np.int64)
 
 

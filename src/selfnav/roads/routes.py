@@ -6,10 +6,10 @@ bound (a route much longer than the straight line between the fixes is cut anywa
 :class:`RouteCache` runs a bounded Dijkstra (numba, binary heap, cost proportional to the
 neighbourhood it settles, not to the size of the map) from each source node it is asked for,
 and keeps the settled nodes as a sparse row in distance order, which a numba kernel scans only
-up to the bound it needs. Rows are reused across fixes and across tracks (a fleet on one map asks for the same
-sources again and again), a row computed to a bound serves every smaller bound, and the store
-is emptied when it reaches its size limit, so memory stays bounded whatever the number of
-tracks. This is the role FMM's precomputed UBODT table plays (Yang & Gidófalvi 2018), computed
+up to the bound it needs. Rows are reused across fixes and across tracks (a fleet on one map
+asks for the same sources again and again), a row computed to a bound serves every smaller
+bound, and the store is emptied when it reaches its size limit, so memory stays bounded whatever
+the number of tracks. This is the role FMM's precomputed UBODT table plays (Yang & Gidófalvi 2018), computed
 lazily instead of for every node of the map up front.
 
 :func:`route_nodes` gives the node sequence of a shortest route (for the driven route of a
@@ -63,7 +63,8 @@ def _heap_pop(hd, hn, size):  # pragma: no cover - numba
 def _bounded_rows(indptr, indices, weights, sources, limits, dist, stamp, done, run0,
                   out_node, out_dist, pos, row_start, row_len):  # pragma: no cover - numba
     """Dijkstra from each source up to its limit; settled nodes appended to ``out_*`` in the
-    order they are settled (non-decreasing distance). Returns ``(sources done, new pos, last run id)``; stops early when ``out`` is full."""
+    order they are settled (non-decreasing distance). Returns ``(sources done, new pos, last
+    run id)``; stops early when ``out`` is full."""
     nnz = len(indices)
     hd = np.empty(nnz + 1)
     hn = np.empty(nnz + 1, np.int64)

@@ -1,8 +1,8 @@
 """A simulated fleet of floating cars, logged the way fleet loggers log (issue 14).
 
 Each track is a piece of a drive of :func:`selfnav.simulate.car.car_route` on a real
-OpenStreetMap graph, stationary for a while at the start, sampled every ``period`` seconds (drawn per
-track) with irregular intervals, time stamps rounded to the second (so two positions can fall in
+OpenStreetMap graph, stationary for a while at the start, sampled every ``period`` seconds (drawn
+per track) with irregular intervals, time stamps rounded to the second (so two positions can fall in
 the same second), white GNSS noise of σ drawn per track, and now and then a position logged twice
 in the same second. Rows can be written shuffled within a track. This is simulated data; the
 truth (the OSM centre line each car drove) comes with it.
