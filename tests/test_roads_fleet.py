@@ -25,6 +25,16 @@ def _write_fleet(path, g, tracks, extra_rows=()):
     return path
 
 
+def _items(g, tracks):
+    """``(track_id, GnssData)`` of simulated tracks (the first of repeated stamps)."""
+    items = []
+    for tr in tracks:
+        t, first = np.unique(tr.t, return_index=True)
+        lat, lon = g.to_geodetic(tr.xy[first, 0], tr.xy[first, 1])
+        items.append((tr.track_id, GnssData(t, lat, lon, np.zeros(len(t)))))
+    return items
+
+
 def _read_out(path):
     rows = list(csv.DictReader(ln for ln in open(path) if not ln.startswith("#")))
     by = {}
@@ -163,11 +173,7 @@ def test_every_track_fails_is_an_error_and_nothing_is_written(tmp_path, capsys):
 
 def test_a_failing_track_does_not_take_the_batch_with_it(karhula, monkeypatch):
     tracks = simulate_fleet(karhula, 3, seed=9, duration=(100.0, 200.0))
-    items = []
-    for tr in tracks:
-        t, first = np.unique(tr.t, return_index=True)
-        lat, lon = karhula.to_geodetic(tr.xy[first, 0], tr.xy[first, 1])
-        items.append((tr.track_id, GnssData(t, lat, lon, np.zeros(len(t)))))
+    items = _items(karhula, tracks)
     m = MatchParams().matcher(karhula)
     real = HmmMatcher.match_many
 
@@ -187,11 +193,7 @@ def test_a_failing_track_does_not_take_the_batch_with_it(karhula, monkeypatch):
 def test_dask_workers_give_the_same_matches(karhula, tmp_path):
     pytest.importorskip("dask.distributed")
     tracks = simulate_fleet(karhula, 10, seed=10, duration=(100.0, 300.0))
-    items = []
-    for tr in tracks:
-        t, first = np.unique(tr.t, return_index=True)
-        lat, lon = karhula.to_geodetic(tr.xy[first, 0], tr.xy[first, 1])
-        items.append((tr.track_id, GnssData(t, lat, lon, np.zeros(len(t)))))
+    items = _items(karhula, tracks)
     here = list(match_tracks(items, karhula, workers=0))
     done = []
     there = list(match_tracks(items, packaged_map("kotka_karhula"), workers=2, chunk_fixes=50,
@@ -199,3 +201,23 @@ def test_dask_workers_give_the_same_matches(karhula, tmp_path):
     assert [r.track_id for r in there] == [tr.track_id for tr in tracks] and sum(done) == 10
     for a, b in zip(here, there):
         np.testing.assert_array_equal(a.result.seg, b.result.seg)
+
+
+def test_parquet_out_and_seconds_in(karhula, tmp_path, capsys):
+    pq = pytest.importorskip("pyarrow.parquet")
+    tracks = simulate_fleet(karhula, 3, seed=12, duration=(100.0, 200.0))
+    src = tmp_path / "f.csv"
+    with open(src, "w") as fh:                       # seconds, one file per call, no track ids
+        fh.write("t,lat_deg,lon_deg\n")
+        lat, lon = karhula.to_geodetic(tracks[0].xy[:, 0], tracks[0].xy[:, 1])
+        for t, a, b in zip(tracks[0].t, np.degrees(lat), np.degrees(lon)):
+            fh.write(f"{t + 1000.5:.1f},{a:.8f},{b:.8f}\n")
+    out = tmp_path / "o.parquet"
+    assert main(["match", "--gnss", str(src), "--map", str(packaged_map("kotka_karhula")),
+                 "--out", str(out), "--sigma-m", "8"]) == 0
+    capsys.readouterr()
+    tab = pq.read_table(out)
+    assert tab.column_names == ["t", "lat_deg", "lon_deg", "h_m", "cross_m", "way_id", "matched"]
+    assert tab.num_rows == len(tracks[0].t)
+    assert tab.column("t").to_pylist()[0] == f"{tracks[0].t[0] + 1000.5:.1f}"
+    assert set(tab.column("way_id").to_pylist()) <= set(karhula.seg_way.tolist())
