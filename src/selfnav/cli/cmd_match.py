@@ -1,5 +1,7 @@
 """``selfnav match``: GNSS-only map matching of one track or a fleet onto OpenStreetMap roads
-(DESIGN §6; issue 14). Parses, calls :func:`selfnav.api.match_files`, formats."""
+(DESIGN §6; issue 14). Parses, calls :func:`selfnav.api.match_files`, formats (imported from
+:mod:`selfnav.roads.fleet`, where it lives: :mod:`selfnav.api` also loads the inertial stack,
+~1 s of start-up the command does not need)."""
 from __future__ import annotations
 
 import contextlib
@@ -100,12 +102,12 @@ def register(app: typer.Typer) -> None:
         """Match GNSS fixes to the road network (hidden Markov model, Viterbi): every fix gets
         a position on a road. A file with a track_id column (or several files) is a fleet: each
         track is matched on its own, in parallel on Dask when large."""
-        from selfnav import api
+        from selfnav.roads.fleet import match_files
 
         if sigma_m is not None and sigma_m <= 0:
             raise InputError("--sigma-m", "must be positive")
         with _one_line_warnings(), _progress_bar(not as_json) as progress:
-            s = api.match_files(gnss, map_path, out, route_out=route_out, sigma_m=sigma_m,
+            s = match_files(gnss, map_path, out, route_out=route_out, sigma_m=sigma_m,
                                 radius_m=radius_m, beta_m=beta_m, gnss_datum=gnss_datum.value,
                                 out_datum=out_datum.value, workers=workers,
                                 scheduler=scheduler, progress=progress)

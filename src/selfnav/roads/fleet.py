@@ -325,3 +325,125 @@ def _on_dask(items, roads, params, route, progress, run, workers, scheduler, cli
             own_client.close()
         if own_cluster is not None:
             own_cluster.close()
+
+
+def match_files(gnss, map_path, out, *, route_out=None, sigma_m: float | None = None,
+                radius_m: float | None = None, beta_m: float | None = None,
+                gnss_datum: str | None = None, out_datum: str | None = None,
+                workers: int | None = None, scheduler: str | None = None,
+                progress=None) -> dict:
+    """``selfnav match``: read GNSS file(s) (one track or a fleet), match, write; returns the
+    summary that ``--json`` prints (re-exported by :mod:`selfnav.api`; it lives here so that the
+    command does not import the inertial stack).
+
+    The output keeps each input row (in time order within its track, repeated stamps sharing
+    their merged fix), the input's ``track_id`` and time text; columns ``t, lat_deg, lon_deg,
+    h_m, cross_m, way_id, matched``. ``route_out``: the driven routes as GeoJSON. A track that
+    cannot be matched gets one warning line naming it and its file line and is left out; if no
+    track can be matched the call fails and writes nothing.
+
+    ``progress(done, total)`` is called as tracks finish.
+    """
+    import contextlib
+    import warnings
+
+    from selfnav.datum import convert, datum_key
+    from selfnav.errors import SelfnavWarning
+    from selfnav.io.fleet import FleetWriter, RouteWriter, fleet_files, read_fleet
+
+    t_start = time.perf_counter()
+    if sigma_m is not None and not sigma_m > 0:
+        raise SelfnavError(f"--sigma-m must be positive, got {sigma_m}")
+    paths = list(gnss) if isinstance(gnss, (list, tuple)) else [gnss]
+    files = fleet_files(paths)
+    out_key = datum_key(out_datum) if out_datum else "wgs84"
+    fleet = read_fleet(files, datum=datum_key(gnss_datum) if gnss_datum else "wgs84")
+    graph = read_roads(map_path)
+    by_id = {}
+    for k, tr in enumerate(fleet.tracks):
+        by_id.setdefault(tr.track_id, []).append(k)
+    failures = [(tr.track_id, tr.error) for tr in fleet.tracks if tr.error]
+    todo = [tr for tr in fleet.tracks if tr.error is None]
+    run = FleetRun()
+    done = [0]
+
+    def tick(k):
+        done[0] += k
+        if progress:
+            progress(done[0], len(todo))
+
+    params = MatchParams(sigma_m, radius_m, beta_m)
+    it = match_tracks([(tr.track_id, tr.gnss) for tr in todo], map_path, params, workers=workers,
+                      scheduler=scheduler, route=route_out is not None, progress=tick, run=run,
+                      graph=graph)
+    datum_name = "WGS-84" if out_key == "wgs84" else out_datum
+    names = ", ".join(Path(f).name for f in files[:3]) + (" ..." if len(files) > 3 else "")
+    comments = [f"selfnav match: GNSS {names} matched to roads of {Path(map_path).name} (HMM, "
+                f"Newson & Krumm); datum {datum_name}",
+                "cross_m: distance from the fix to its matched road position, m; way_id: "
+                "OpenStreetMap way; matched: 1 if a road lies within the search radius",
+                "map data (c) OpenStreetMap contributors, ODbL"]
+    n_fix = n_in = n_restart = matched_tracks = n_out = 0
+    sigmas = []
+    sum_moved, max_moved, track_s = 0.0, 0.0, 0.0
+    with contextlib.ExitStack() as stack:
+        w = stack.enter_context(FleetWriter(out, track_id=fleet.has_track_id or len(files) > 1,
+                                            comments=comments))
+        rw = stack.enter_context(RouteWriter(
+            route_out, comment="driven routes matched by selfnav; map data (c) OpenStreetMap "
+            "contributors, ODbL")) if route_out is not None else None
+        for tr, tm in zip(todo, it):
+            if tm.error:
+                failures.append((tr.track_id, f"{tr.source}, line {tr.first_line}: {tm.error}"))
+                continue
+            res = tm.result
+            matched_tracks += 1
+            n_fix += len(res.t)
+            n_in += int(res.in_radius.sum())
+            n_restart += int(res.restart.sum()) - 1
+            sum_moved += float(res.moved.sum())
+            max_moved = max(max_moved, float(res.moved.max()))
+            n_out += int(tm.outside)
+            track_s += tm.seconds
+            sigmas.append(res.sigma)
+            f = tr.row_fix
+            lat, lon, h = res.lat[f], res.lon[f], tr.h_m
+            if out_key != "wgs84":
+                lat, lon, h = convert(lat, lon, np.nan_to_num(h), "wgs84", out_key)
+            w.write(tr.track_id, tr.t_text, np.degrees(lat), np.degrees(lon), h, res.moved[f],
+                    res.way[f], res.in_radius[f])
+            if rw is not None:
+                rw.write(tr.track_id, tm.route or [],
+                         {"fixes": len(res.t), "length_m": round(tm.route_length_m, 1),
+                          "matched_share": round(float(res.in_radius.mean()), 4)})
+        if not matched_tracks:
+            first = failures[0][1] if failures else "no track in the input"
+            if len(fleet.tracks) == 1:
+                raise SelfnavError(first)
+            raise SelfnavError(f"no track could be matched ({len(failures)} failed; the first: "
+                               f"{first})")
+    for k, (_, msg) in enumerate(failures):
+        if k == 20:
+            warnings.warn(f"{len(failures) - 20} more tracks left out", SelfnavWarning,
+                          stacklevel=2)
+            break
+        warnings.warn(f"{msg}: track left out", SelfnavWarning, stacklevel=2)
+    elapsed = time.perf_counter() - t_start
+    probe = HmmMatcher(graph, sigma=sigma_m or float(np.median(sigmas)), radius=radius_m,
+                       beta=beta_m)
+    return {"gnss": [str(f) for f in files], "map": str(map_path), "out": str(out),
+            "route_out": None if route_out is None else str(route_out),
+            "tracks": len(fleet.tracks), "tracks_matched": matched_tracks,
+            "tracks_failed": len(failures), "rows": w.rows, "fixes": n_fix,
+            "matched_share": n_in / n_fix if n_fix else 0.0,
+            "mean_correction_m": sum_moved / n_fix if n_fix else 0.0,
+            "max_correction_m": max_moved, "restarts": n_restart, "outside_map": n_out,
+            "time_form": fleet.time_form, "seconds": elapsed,
+            "fixes_per_second": n_fix / elapsed if elapsed > 0 else None,
+            "match_seconds": track_s,
+            "matcher_fixes_per_second": n_fix / track_s if track_s > 0 else None,
+            "mode": run.mode, "workers": run.workers, "startup_seconds": run.startup_s,
+            "map_nodes": graph.n_nodes, "map_segments": graph.n_segments,
+            "sigma_m": probe.sigma, "sigma_estimated": sigma_m is None,
+            "beta_m": probe.beta, "radius_m": probe.radius,
+            "failed": [{"track_id": t, "error": e} for t, e in failures[:100]]}
