@@ -143,3 +143,14 @@ def test_common_spellings_and_a_row_id_column(tmp_path):
     veh = _write(tmp_path / "veh.csv", "id,timestamp,lat,lon\n"
                  "a,0,60.1,26.9\na,5,60.1,26.91\nb,0,60.2,26.9\nb,5,60.2,26.91\n")
     assert [tr.track_id for tr in read_fleet(veh).tracks] == ["a", "b"]   # ids that repeat
+
+
+def test_slash_dates_and_separate_date_and_time_columns(tmp_path):
+    t, form, bad = parse_times(["2019/03/11 08:33:24", "2019/03/11 08:33:30"])
+    assert form == "iso" and len(bad) == 0 and t[1] - t[0] == 6.0
+    p = _write(tmp_path / "dt.csv", "vehicle,date,time,lat,lon\n"
+               "v,2019-03-11,23:59:58,60.1,26.9\nv,2019-03-12,00:00:03,60.1,26.91\n")
+    fleet, notes = _notes(lambda: read_fleet(p))
+    tr = fleet.tracks[0]
+    assert tr.t_text == ["2019-03-11 23:59:58", "2019-03-12 00:00:03"]
+    assert np.diff(tr.gnss.t).tolist() == [5.0] and any("'date'" in n for n in notes)

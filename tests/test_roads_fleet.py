@@ -221,3 +221,20 @@ def test_parquet_out_and_seconds_in(karhula, tmp_path, capsys):
     assert tab.num_rows == len(tracks[0].t)
     assert tab.column("t").to_pylist()[0] == f"{tracks[0].t[0] + 1000.5:.1f}"
     assert set(tab.column("way_id").to_pylist()) <= set(karhula.seg_way.tolist())
+
+
+def test_swapped_latitude_and_longitude_are_noticed(karhula, tmp_path, capsys):
+    tracks = simulate_fleet(karhula, 3, seed=13, duration=(100.0, 200.0), sigma=(3.0, 10.0))
+    ids, ts, lats, lons = fleet_rows(karhula, tracks)
+    src = tmp_path / "swapped.csv"
+    with open(src, "w") as fh:
+        fh.write("track_id,t,lat_deg,lon_deg\n")
+        fh.writelines(f"{a},{b},{d:.8f},{c:.8f}\n" for a, b, c, d in zip(ids, ts, lats, lons))
+    out = tmp_path / "o.csv"
+    assert main(["match", "--gnss", str(src), "--map", str(packaged_map("kotka_karhula")),
+                 "--out", str(out), "--json"]) == 0
+    cap = capsys.readouterr()
+    assert json.loads(cap.out)["tracks_matched"] == 3
+    assert "latitude and longitude look swapped" in cap.err
+    share, _ = _share_within(karhula, tracks, _read_out(out))
+    assert share > 0.95

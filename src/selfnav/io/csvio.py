@@ -234,8 +234,10 @@ def atomic_write_bytes(path, data: bytes):
 
 
 # ------------------------------------------------------------------ time columns
-#: ISO-8601 date-times: ``2019-03-11T08:33:24``, optional fraction and zone (``Z``, ``+02:00``)
-_ISO_HINT = re.compile(r"^\s*\d{4}-?\d{2}-?\d{2}[T ]")
+#: ISO-8601 date-times: ``2019-03-11T08:33:24``, optional fraction and zone (``Z``, ``+02:00``);
+#: ``2019/03/11 08:33:24`` is read as the same
+_ISO_HINT = re.compile(r"^\s*\d{4}[-/]?\d{2}[-/]?\d{2}[T ]")
+_SLASH_DATE = re.compile(r"^(\s*\d{4})/(\d{2})/(\d{2})")
 
 
 def parse_numbers(texts):
@@ -284,7 +286,7 @@ def parse_times(texts):
     utc = dt.timezone.utc
     for k, s in enumerate(texts):
         try:
-            d = dt.datetime.fromisoformat(s.strip())
+            d = dt.datetime.fromisoformat(_SLASH_DATE.sub(r"\1-\2-\3", s.strip()))
         except (AttributeError, TypeError, ValueError):
             bad.append(k)
             continue

@@ -52,6 +52,7 @@ ALIASES = {
                  "trajectory", "vehicle_id", "device_id", "vehicle", "device", "car_id",
                  "taxi_id", "bus_id", "unit_id", "driver_id", "object_id", "imei"),
     "ve": ("ve",), "vn": ("vn",), "vu": ("vu",),
+    "date": ("date", "day", "gps_date"),
 }
 #: a column that is a track id only if its values repeat (otherwise it numbers the rows)
 WEAK_TRACK_ID = ("id",)
@@ -243,11 +244,20 @@ def read_parquet_columns(path, required, optional=()):
 
 
 def read_columns(path, required, optional=()):
-    """CSV or Parquet (by the suffix): ``({schema: [text]}, lines)``."""
+    """CSV or Parquet (by the suffix): ``({schema: [text]}, lines)``. A time column that holds
+    clock times only (``08:33:24``) beside a ``date`` column is read as their date-time."""
     name = Path(path).name.lower()
     if name.endswith((".parquet", ".pq")):
-        return read_parquet_columns(path, required, optional)
-    return read_csv_columns(path, required, optional)
+        cols, lines = read_parquet_columns(path, required, (*optional, "date"))
+    else:
+        cols, lines = read_csv_columns(path, required, (*optional, "date"))
+    date = cols.pop("date", None)
+    if date is not None and "t" in cols:
+        first = next((v for v in cols["t"] if v), "")
+        if re.match(r"^\s*\d{1,2}:\d{2}", first):
+            cols["t"] = [f"{d.strip()} {c.strip()}" for d, c in zip(date, cols["t"])]
+            _note(f"{path}: columns 'date' and the time of day read together as t")
+    return cols, lines
 
 
 # ------------------------------------------------------------------ tracks

@@ -95,17 +95,37 @@ def process_matcher(roads, params: MatchParams) -> HmmMatcher:
     return m
 
 
+def inside_map(g: RoadGraph, lat, lon, margin=MAP_MARGIN_M):
+    """Which fixes (rad) lie within ``margin`` of the map's bounding box."""
+    x, y = g.to_local(lat, lon)
+    xmin, ymin, xmax, ymax = g.bounds()
+    return (x > xmin - margin) & (x < xmax + margin) & (y > ymin - margin) & (y < ymax + margin)
+
+
+def swapped_columns(g: RoadGraph, gnss_list, sample=20_000) -> bool:
+    """True when latitude and longitude look swapped: no fix lies on the map as given, and most
+    do with the two exchanged."""
+    lat = np.concatenate([gd.lat for gd in gnss_list if gd is not None] or [np.zeros(0)])
+    lon = np.concatenate([gd.lon for gd in gnss_list if gd is not None] or [np.zeros(0)])
+    if not len(lat):
+        return False
+    k = np.linspace(0, len(lat) - 1, min(sample, len(lat))).astype(int)
+    lat, lon = lat[k], lon[k]
+    if inside_map(g, lat, lon).any() or np.any(np.abs(lon) > np.pi / 2):
+        return False
+    return bool(np.mean(inside_map(g, lon, lat)) > 0.5)
+
+
 def _failed(track_id, gnss, g):
     """Why a track cannot be matched, or None; and its local positions."""
     if gnss is None or len(gnss.t) < 2:
         return f"track '{track_id}': fewer than two fixes", None, 0
     x, y = g.to_local(gnss.lat, gnss.lon)
-    xmin, ymin, xmax, ymax = g.bounds()
-    mg = MAP_MARGIN_M
-    inside = (x > xmin - mg) & (x < xmax + mg) & (y > ymin - mg) & (y < ymax + mg)
+    inside = inside_map(g, gnss.lat, gnss.lon)
     if not inside.any():
-        return (f"track '{track_id}': none of the {len(x)} fixes lies within {mg / 1e3:.0f} km "
-                f"of the map {g.name}: another area, or a datum/degree mix-up?"), None, len(x)
+        return (f"track '{track_id}': none of the {len(x)} fixes lies within "
+                f"{MAP_MARGIN_M / 1e3:.0f} km of the map {g.name}: another area, or a "
+                "datum/degree mix-up?"), None, len(x)
     return None, np.column_stack([x, y]), int((~inside).sum())
 
 
@@ -359,9 +379,13 @@ def match_files(gnss, map_path, out, *, route_out=None, sigma_m: float | None = 
     out_key = datum_key(out_datum) if out_datum else "wgs84"
     fleet = read_fleet(files, datum=datum_key(gnss_datum) if gnss_datum else "wgs84")
     graph = read_roads(map_path)
-    by_id = {}
-    for k, tr in enumerate(fleet.tracks):
-        by_id.setdefault(tr.track_id, []).append(k)
+    if swapped_columns(graph, [tr.gnss for tr in fleet.tracks]):
+        warnings.warn(f"{names_of(files)}: latitude and longitude look swapped (no fix lies on "
+                      "the map as given, most do exchanged): read exchanged", SelfnavWarning,
+                      stacklevel=2)
+        for tr in fleet.tracks:
+            if tr.gnss is not None:
+                tr.gnss.lat, tr.gnss.lon = tr.gnss.lon, tr.gnss.lat
     failures = [(tr.track_id, tr.error) for tr in fleet.tracks if tr.error]
     todo = [tr for tr in fleet.tracks if tr.error is None]
     run = FleetRun()
@@ -377,7 +401,7 @@ def match_files(gnss, map_path, out, *, route_out=None, sigma_m: float | None = 
                       scheduler=scheduler, route=route_out is not None, progress=tick, run=run,
                       graph=graph)
     datum_name = "WGS-84" if out_key == "wgs84" else out_datum
-    names = ", ".join(Path(f).name for f in files[:3]) + (" ..." if len(files) > 3 else "")
+    names = names_of(files)
     comments = [f"selfnav match: GNSS {names} matched to roads of {Path(map_path).name} (HMM, "
                 f"Newson & Krumm); datum {datum_name}",
                 "cross_m: distance from the fix to its matched road position, m; way_id: "
@@ -447,3 +471,8 @@ def match_files(gnss, map_path, out, *, route_out=None, sigma_m: float | None = 
             "sigma_m": probe.sigma, "sigma_estimated": sigma_m is None,
             "beta_m": probe.beta, "radius_m": probe.radius,
             "failed": [{"track_id": t, "error": e} for t, e in failures[:100]]}
+
+
+def names_of(files) -> str:
+    """The first file names of a list, for messages."""
+    return ", ".join(Path(f).name for f in files[:3]) + (" ..." if len(files) > 3 else "")
