@@ -67,7 +67,7 @@ def test_bad_rows_and_short_tracks_are_named_and_the_others_kept(tmp_path):
     p = _write(tmp_path / "f.csv", "track_id,t,lat_deg,lon_deg\n"
                "x,0,60.1,26.9\nx,5,abc,26.9\nx,10,60.1,26.91\n"
                "y,0,60.2,26.9\n"
-               "z,0,60.3,26.9\nz,5,95.0,26.9\nz,7,60.3,26.95\n")
+               "z,0,60.3,26.9\nz,5,95.0,26.9\nz,7,60.3,26.95\nz,8,0,0\n")
     fleet, notes = _notes(lambda: read_fleet(p))
     by = {tr.track_id: tr for tr in fleet.tracks}
     assert len(by["x"].gnss) == 2 and by["x"].error is None
@@ -75,7 +75,8 @@ def test_bad_rows_and_short_tracks_are_named_and_the_others_kept(tmp_path):
     assert len(by["z"].gnss) == 2
     bad = [n for n in notes if "skipped" in n]
     assert any("line 3" in n and "track 'x'" in n and "'abc' is not a number" in n for n in bad)
-    assert any("line 7" in n and "track 'z'" in n and "latitude" in n for n in bad)
+    assert any("line 7" in n and "track 'z'" in n and "latitude" in n and "2 rows skipped" in n
+               for n in bad)
 
 
 def test_missing_column_is_one_error_with_the_schema(tmp_path):

@@ -299,6 +299,8 @@ def _row_values(path, cols, lines, *, strict):
                                     "(radians? projected metres? swapped columns?)"))
     for k in np.flatnonzero(np.isfinite(lon) & (np.abs(lon) > 360)):
         reasons.setdefault(int(k), ("lon_deg", f"{lon[k]} is not a longitude in degrees"))
+    for k in np.flatnonzero((lat == 0) & (lon == 0)):     # a logger's "no fix"
+        reasons.setdefault(int(k), ("lat_deg", "latitude and longitude both 0: no fix"))
     if "sigma_m" in vals:
         sig = vals["sigma_m"]
         for k in np.flatnonzero(np.isfinite(sig) & ~(sig > 0)):
