@@ -22,8 +22,8 @@ The Python API (each also a ``selfnav`` command):
 
 ``read_imu, read_gnss, read_roads, read_solution, read_attitude`` read files;
 ``estimate_latitude`` (seed 000), ``navigate_moving`` and ``MovingBaseNavigator`` (seeds
-002/003), ``navigate``
-(EKF or seed 004, with or without roads), ``match`` (GNSS-only map matching) and
+002/003), ``navigate`` (EKF or seed 004, with or without roads), ``match`` (GNSS-only map
+matching; ``read_fleet``, ``match_fleet`` and ``match_files`` for fleets of tracks) and
 ``evaluate`` run the methods; ``simulate`` makes data with known truth.
 """
 
@@ -35,6 +35,7 @@ _API = {
     "read_imu": "selfnav.api", "read_imu_positions": "selfnav.api", "read_gnss": "selfnav.api",
     "read_roads": "selfnav.api", "read_solution": "selfnav.api", "read_attitude": "selfnav.api",
     "estimate_latitude": "selfnav.api", "navigate": "selfnav.api", "match": "selfnav.api",
+    "match_fleet": "selfnav.api", "match_files": "selfnav.api", "read_fleet": "selfnav.api",
     "evaluate": "selfnav.api", "filter_config": "selfnav.api", "Solution": "selfnav.api",
     "allan_noise": "selfnav.api", "latitude_requirements": "selfnav.api",
     "latitude_error_budget": "selfnav.api", "evaluate_report": "selfnav.api",

@@ -25,7 +25,9 @@ from selfnav.latitude import estimate_latitude as _estimate_latitude
 from selfnav.latitude import estimate_latitude_multiposition
 from selfnav.roads.aid import EkfRoadAid
 from selfnav.roads.graph import RoadGraph, read_roads
-from selfnav.roads.hmm import HmmMatcher
+from selfnav.io.fleet import Fleet, read_fleet
+from selfnav.roads.fleet import (FleetRun, MatchParams, match_files, match_track,
+                                 match_tracks)
 from selfnav.seed004 import SeedConfig, run_seed
 from selfnav.solution import Solution, read_solution
 from selfnav.types import GnssData, ImuData, Trajectory
@@ -292,26 +294,80 @@ def write_fix_log(path, solution: Solution):
                           "anchored": "%d"})
 
 
-def match(gnss: GnssData, roads, *, sigma_m: float = 10.0, radius_m: float | None = None,
-          beta_m: float | None = None) -> Solution:
+def match(gnss: GnssData, roads, *, sigma_m: float | None = None,
+          radius_m: float | None = None, beta_m: float | None = None) -> Solution:
     """GNSS-only map matching (hidden Markov model, Viterbi) onto OpenStreetMap roads.
 
-    Returns a :class:`Solution` whose rows are the fixes moved onto the roads, with the
-    ``cross_m`` column (distance moved) and the matcher's summary in ``stats``.
+    ``sigma_m``: the GNSS σ where the fixes carry none; None estimates it from the fixes
+    (Newson & Krumm's median distance to the nearest road). Returns a :class:`Solution` whose
+    rows are the fixes moved onto the roads, with the columns ``cross_m`` (distance moved),
+    ``way_id`` (OpenStreetMap way) and ``matched`` (a road within the search radius), and the
+    matcher's summary in ``stats``.
     """
-    if not sigma_m > 0:
+    if sigma_m is not None and not sigma_m > 0:
         raise SelfnavError(f"sigma_m must be positive, got {sigma_m}")
     graph = _as_roads(roads)
-    x, y = graph.to_local(gnss.lat, gnss.lon)
-    m = HmmMatcher(graph, sigma=sigma_m, radius=radius_m, beta=beta_m)
-    res = m.match(gnss.t, np.column_stack([x, y]), gnss.sigma_m)
+    m = MatchParams(sigma_m, radius_m, beta_m).matcher(graph)
+    tm = match_track(m, gnss.source or "track", gnss, auto_sigma=sigma_m is None)
+    if tm.error:
+        raise SelfnavError(tm.error)
+    return _match_solution(gnss, tm.result, m.with_sigma(tm.result.sigma))
+
+
+def _match_solution(gnss: GnssData, res, m) -> Solution:
     n = len(gnss.t)
     nan3 = np.full((n, 3), np.nan)
     tr = Trajectory(gnss.t, res.lat, res.lon, gnss.h, nan3, np.full((n, 3, 3), np.nan),
                     source="selfnav match (HMM)")
-    stats = {**res.summary(), "map_nodes": graph.n_nodes, "map_segments": graph.n_segments,
+    stats = {**res.summary(), "map_nodes": m.graph.n_nodes, "map_segments": m.graph.n_segments,
              "sigma_m": m.sigma, "beta_m": m.beta, "radius_m": m.radius}
-    return Solution(tr, None, {"cross_m": res.moved}, stats, "hmm", res)
+    return Solution(tr, None, {"cross_m": res.moved, "way_id": res.way,
+                               "matched": res.in_radius}, stats, "hmm", res)
+
+
+def match_fleet(tracks, roads, *, sigma_m: float | None = None, radius_m: float | None = None,
+                beta_m: float | None = None, workers: int | None = None,
+                scheduler: str | None = None, route: bool = False, progress=None,
+                run: FleetRun | None = None):
+    """Map-match many tracks, each on its own; results in track order, as they come.
+
+    Parameters
+    ----------
+    tracks : Fleet, list of (track_id, GnssData), or path(s)
+        A :class:`selfnav.io.fleet.Fleet` (:func:`read_fleet`), pairs, or fleet files/folders
+        (CSV or Parquet with an optional ``track_id`` column).
+    roads : path or RoadGraph
+        The map; a path lets Dask workers read it themselves.
+    sigma_m, radius_m, beta_m :
+        As :func:`match`.
+    workers : int, optional
+        Local Dask workers; 0 = this process. Default: this process for a small fleet (under
+        200,000 fixes), else one worker per core.
+    scheduler : str, optional
+        An existing Dask scheduler (``tcp://host:8786``).
+    route : bool
+        Also compute each track's driven route (``TrackMatch.route``).
+    progress : callable(n), optional
+        Called with the number of tracks just finished.
+
+    Yields
+    ------
+    selfnav.roads.fleet.TrackMatch
+        ``track_id``, ``result`` (a :class:`~selfnav.roads.hmm.MatchResult`, or None with
+        ``error`` set), ``route``.
+    """
+    if sigma_m is not None and not sigma_m > 0:
+        raise SelfnavError(f"sigma_m must be positive, got {sigma_m}")
+    if isinstance(tracks, Fleet):
+        items = [(tr.track_id, tr.gnss) for tr in tracks.tracks]
+    elif isinstance(tracks, (list, tuple)) and tracks and isinstance(tracks[0], tuple):
+        items = list(tracks)
+    else:
+        items = [(tr.track_id, tr.gnss) for tr in read_fleet(tracks).tracks]
+    if not isinstance(roads, RoadGraph):
+        roads = str(roads)
+    return match_tracks(items, roads, MatchParams(sigma_m, radius_m, beta_m), workers=workers,
+                        scheduler=scheduler, route=route, progress=progress, run=run)
 
 
 def evaluate(truth, solution, *, roads=None) -> dict:
@@ -451,7 +507,8 @@ def as_trajectory(x) -> Trajectory:
 
 
 __all__ = ["read_imu", "read_imu_positions", "read_gnss", "read_roads", "read_solution",
-           "read_attitude", "estimate_latitude", "navigate", "match", "evaluate",
-           "filter_config", "initial_state", "write_fix_log", "Solution", "allan_noise",
-           "latitude_requirements", "latitude_error_budget", "evaluate_report", "map_coverage",
-           "check_map_covers", "imu_gaps", "simulate_files", "run_montecarlo", "as_trajectory"]
+           "read_attitude", "read_fleet", "estimate_latitude", "navigate", "match", "match_fleet",
+           "match_files", "evaluate", "filter_config", "initial_state", "write_fix_log",
+           "Solution", "allan_noise", "latitude_requirements", "latitude_error_budget",
+           "evaluate_report", "map_coverage", "check_map_covers", "imu_gaps", "simulate_files",
+           "run_montecarlo", "as_trajectory"]

@@ -27,10 +27,6 @@ Registering a pair is one call::
 """
 from __future__ import annotations
 
-import logging
-import os
-import signal
-import threading
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -38,7 +34,9 @@ from typing import Callable
 
 import numpy as np
 
-from selfnav.errors import SelfnavError, check_interrupt
+from selfnav.cluster import local_cluster, make_client  # noqa: F401 (local_cluster re-exported)
+from selfnav.cluster import results_as_completed
+from selfnav.errors import SelfnavError
 
 
 # ------------------------------------------------------------------------------------------------
@@ -256,80 +254,6 @@ def _to_table(rows: list[dict]) -> dict:
     return {k: np.array([r[k] for r in rows]) for k in keys}
 
 
-def _results_as_completed(futures, poll_s: float = 0.05):
-    """Results of Dask futures as they finish, polling so that the main thread stays responsive
-    to Ctrl-C (a signal the kernel hands to one of Dask's threads would not wake a blocking
-    wait: the process hung until the next future finished)."""
-    import time
-
-    pending = list(futures)
-    while pending:
-        check_interrupt()
-        still = []
-        for f in pending:
-            if f.done():
-                yield f.result()
-            else:
-                still.append(f)
-        pending = still
-        if pending:
-            time.sleep(poll_s)
-
-
-def _make_client(workers: int, scheduler: str | None):
-    from dask.distributed import Client
-
-    if scheduler:
-        try:
-            return Client(scheduler, timeout="10s"), None
-        except (OSError, TimeoutError) as e:
-            raise SelfnavError(f"cannot reach the Dask scheduler at {scheduler}: {e}") from None
-    cluster = local_cluster(workers)
-    return Client(cluster), cluster
-
-
-def local_cluster(workers: int):
-    """A ``LocalCluster`` of ``workers`` processes with one thread each, tuned for many small runs.
-
-    Dask sets ``MALLOC_TRIM_THRESHOLD_=65536`` in its workers, which also switches off glibc's
-    dynamic mmap threshold: every NumPy array above 128 kB (a 60 s, 100 Hz IMU record is 144 kB)
-    is then mmapped and unmapped per use, and the workers spent ~45 % more CPU per run than this
-    process (measured). The variable is left unset here, so the workers allocate like any Python
-    process.
-    """
-    import dask
-    from dask.distributed import LocalCluster
-
-    key = "MALLOC_TRIM_THRESHOLD_"
-    saved = os.environ.pop(key, None)  # a nanny of an earlier cluster may have exported it
-    try:
-        _start_forkserver_ignoring_sigint()
-        with dask.config.set({f"distributed.nanny.pre-spawn-environ.{key}": None,
-                              "distributed.worker.multiprocessing-method": "forkserver"}):
-            return LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                                dashboard_address=None, silence_logs=logging.CRITICAL)
-    finally:
-        if saved is not None:
-            os.environ[key] = saved
-
-
-def _start_forkserver_ignoring_sigint() -> None:
-    """Start multiprocessing's fork server with SIGINT ignored; the worker processes it forks
-    inherit that, so Ctrl-C reaches this process only, which then shuts the cluster down (no
-    traceback from every worker). Only the fork and exec of the server (milliseconds) run with
-    SIGINT ignored here: a Ctrl-C during the cluster's start-up is not lost."""
-    import multiprocessing.forkserver as fs
-
-    if threading.current_thread() is not threading.main_thread():
-        fs.ensure_running()
-        return
-    old = signal.signal(signal.SIGINT, signal.SIG_IGN)
-    try:
-        fs.ensure_running()
-    finally:
-        signal.signal(signal.SIGINT, old)
-
-
 def run_montecarlo(name: str, runs: int, *, seed: int = 0, params: dict | None = None,
                    workers: int = 2, scheduler: str | None = None, chunk_size: int | None = None,
                    client=None, progress: Callable[[int], None] | None = None) -> MonteCarloResult:
@@ -383,7 +307,7 @@ def run_montecarlo(name: str, runs: int, *, seed: int = 0, params: dict | None =
                                "this process with --workers 0") from None
 
         if client is None:
-            client, own_cluster = _make_client(workers, scheduler)
+            client, own_cluster = make_client(workers, scheduler)
             own_client = client
         try:
             nw = len(client.scheduler_info().get("workers", {})) or max(workers, 1)
@@ -392,7 +316,7 @@ def run_montecarlo(name: str, runs: int, *, seed: int = 0, params: dict | None =
             size = chunk_size or default_chunk_size(runs, nw)
             futs = [client.submit(run_chunk, pair.run, idx, seeds[idx], p, pure=False)
                     for idx in _chunks(runs, size)]
-            for part in _results_as_completed(futs):
+            for part in results_as_completed(futs):
                 rows += part
                 if progress:
                     progress(len(part))

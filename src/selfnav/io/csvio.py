@@ -238,3 +238,66 @@ def check_positive(table, column):
         raise InputError(table["_path"], f"{column} {float(x[k]):g} must be positive",
                          row=int(table["_lines"][k]), column=column)
     return x
+
+
+# ------------------------------------------------------------------ time columns
+#: ISO-8601 date-times: ``2019-03-11T08:33:24``, optional fraction and zone (``Z``, ``+02:00``);
+#: ``2019/03/11 08:33:24`` is read as the same
+_ISO_HINT = re.compile(r"^\s*\d{4}[-/]?\d{2}[-/]?\d{2}[T ]")
+_SLASH_DATE = re.compile(r"^(\s*\d{4})/(\d{2})/(\d{2})")
+
+
+def parse_numbers(texts):
+    """Strings to float64; returns ``(values, bad)`` with ``bad`` the indices of entries that
+    are not numbers (empty strings count as bad; their values are NaN)."""
+    texts = list(texts)
+    try:
+        vals = np.asarray(texts, dtype=float) if texts else np.zeros(0)
+        return vals, np.zeros(0, np.int64)
+    except ValueError:
+        pass
+    vals = np.full(len(texts), np.nan)
+    bad = []
+    for k, s in enumerate(texts):
+        try:
+            vals[k] = float(s)
+        except (TypeError, ValueError):
+            bad.append(k)
+    return vals, np.asarray(bad, np.int64)
+
+
+def parse_times(texts):
+    """A time column as seconds: numbers (seconds; epoch milliseconds are recognised by their
+    size) or ISO-8601 date-times (with a zone, or without one: then read as UTC).
+
+    Returns
+    -------
+    t : (N,) float64 s (NaN where unreadable)
+    form : {"seconds", "milliseconds", "iso"}
+        What the column holds (decided by its first readable entry).
+    bad : (K,) int
+        Indices of entries that are not of that form.
+    """
+    import datetime as dt
+
+    texts = list(texts)
+    first = next((s for s in texts if s and s.strip()), "")
+    if not _ISO_HINT.match(first):
+        t, bad = parse_numbers(texts)
+        ok = np.isfinite(t)
+        if ok.any() and np.median(np.abs(t[ok])) > 1e11:      # after the year 5000 in seconds:
+            return t / 1000.0, "milliseconds", bad            # epoch milliseconds
+        return t, "seconds", bad
+    t = np.full(len(texts), np.nan)
+    bad = []
+    utc = dt.timezone.utc
+    for k, s in enumerate(texts):
+        try:
+            d = dt.datetime.fromisoformat(_SLASH_DATE.sub(r"\1-\2-\3", s.strip()))
+        except (AttributeError, TypeError, ValueError):
+            bad.append(k)
+            continue
+        if d.tzinfo is None:
+            d = d.replace(tzinfo=utc)
+        t[k] = d.timestamp()
+    return t, "iso", np.asarray(bad, np.int64)
