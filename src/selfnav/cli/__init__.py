@@ -87,9 +87,11 @@ def _one_line_warnings():
 
 
 @contextlib.contextmanager
-def _interrupt_as_error():
+def _interrupt_as_error(last: bool = False):
     """Ctrl-C raises :class:`Interrupted` (typer would turn ``KeyboardInterrupt`` into a plain
-    exit code, and libraries catch it)."""
+    exit code, and libraries catch it). ``last``: the process ends after this command, so a
+    Ctrl-C that comes after the work is done is ignored rather than left to kill the process
+    on its way out (exit by signal, no line)."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
@@ -103,7 +105,7 @@ def _interrupt_as_error():
     try:
         yield
     finally:
-        signal.signal(signal.SIGINT, old)
+        signal.signal(signal.SIGINT, signal.SIG_IGN if last else old)
         interrupt_requested.clear()
 
 
@@ -116,7 +118,7 @@ def _usage_line(e) -> str:
 
 def _run(argv) -> int:
     try:
-        with _interrupt_as_error(), _one_line_warnings():
+        with _interrupt_as_error(last=argv is None), _one_line_warnings():
             rv = app(args=argv, standalone_mode=False, prog_name="selfnav")
         code = int(rv) if isinstance(rv, int) else 0
         if code == 130:  # typer's answer to a KeyboardInterrupt it caught

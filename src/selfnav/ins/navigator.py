@@ -565,8 +565,10 @@ class StreamingNavigator:
         elif not win_ok:
             reason = reason or "window test while dead-reckoning"
         # the INS itself lost? the recent fixes fit one smooth track by themselves, but not the
-        # INS displacement, for reinit_after seconds: re-initialise from them
-        if not win_ok and len(self.win) >= out.window and self._fixes_smooth(fx.t):
+        # INS displacement, for reinit_after seconds: re-initialise from them — unless a
+        # dead-reckoning reference (a mature shadow when it went suspect) says that smooth track
+        # is a drift (then only after an outage longer than any outlier episode)
+        if long_out and not win_ok and len(self.win) >= out.window and self._fixes_smooth(fx.t):
             self._lost_since = fx.t if self._lost_since is None else self._lost_since
             if fx.t - self._lost_since >= out.reinit_after and self._reinit(fx.t):
                 return True, "INS lost: re-initialised from the fixes", np.zeros(flt.nx)
@@ -576,8 +578,8 @@ class StreamingNavigator:
             # a long run of self-consistent fixes that the dead reckoning cannot explain: its
             # drift exceeded P. After a long dead reckoning the velocity and heading are as
             # suspect as the position: start them again from the run; else widen P
-            if fx.t - self._t_suspect > out.reinit_after and self._fixes_smooth(fx.t) \
-                    and self._reinit(fx.t):
+            if long_out and fx.t - self._t_suspect > out.reinit_after \
+                    and self._fixes_smooth(fx.t) and self._reinit(fx.t):
                 self.reacq += 1
                 return True, "re-acquired: re-initialised from the fixes", np.zeros(flt.nx)
             add = np.zeros_like(flt.P)

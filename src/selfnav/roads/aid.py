@@ -186,14 +186,13 @@ class EkfRoadAid:
 
     def _grade_prior(self, t, flt, v):
         """Level-road prior on the vertical velocity (class docstring)."""
-        if self.grade_sigma is None or t - self.t_grade < self.interval - 1e-9 \
-                or not hasattr(flt, "_kalman"):
+        if self.grade_sigma is None or t - self.t_grade < self.interval - 1e-9:
             return
         self.t_grade = t
         H = np.zeros((1, flt.nx))
         H[0, 5] = 1.0
         s_v = self.grade_sigma * float(np.hypot(v[0], v[1])) + 0.1
-        flt._kalman(np.array([float(v[2])]), H, np.array([[s_v * s_v]]))
+        flt.kalman(np.array([float(v[2])]), H, np.array([[s_v * s_v]]))
         self.counts["grade"] += 1
 
     def __call__(self, t, flt):
