@@ -50,6 +50,24 @@ def test_time_offset_from_the_gyro_heading(parked_drive, shift):
     assert sig < 0.01
 
 
+@pytest.mark.parametrize("kind", ["white", "gm"])
+def test_time_offset_from_positions_survives_unflagged_outliers(parked_drive, kind):
+    """Positions only (4 Hz, σ 2 cm) with 90 s of unflagged 200 m outliers: the course from
+    position differences keeps only car-like velocities and the misfit is truncated, so the
+    outliers cannot pull the offset (drive_0708 had moved it by 0.3 s)."""
+    from selfnav.sensors import with_outliers
+    from selfnav.types import GnssData
+
+    sim = parked_drive
+    t = np.arange(sim.truth.t[0], sim.truth.t[-1], 0.25)
+    lat = np.interp(t, sim.truth.t, sim.truth.lat)
+    lon = np.interp(t, sim.truth.t, sim.truth.lon)
+    g = GnssData.from_arrays(t, lat, lon, np.zeros(len(t)), 0.02)
+    g = with_outliers(g, t[0] + 150.0, 90.0, kind=kind, seed=3, velocity="drop")
+    off, _ = calibrate.estimate_time_offset(sim.imu.shifted(0.15), g)
+    assert off == pytest.approx(-0.15, abs=0.02)
+
+
 def test_velocity_lag_is_measured_and_removed(parked_drive):
     """A 4 Hz receiver that reports the velocity 0.2 s late (precise positions)."""
     sim = parked_drive

@@ -155,3 +155,24 @@ def test_slash_dates_and_separate_date_and_time_columns(tmp_path):
     tr = fleet.tracks[0]
     assert tr.t_text == ["2019-03-11 23:59:58", "2019-03-12 00:00:03"]
     assert np.diff(tr.gnss.t).tolist() == [5.0] and any("'date'" in n for n in notes)
+
+
+def test_windows_and_old_mac_line_ends_and_a_stray_carriage_return(tmp_path):
+    """CRLF and CR files read like LF ones; a lone ``\\r`` is a line end, not a crash (found
+    by the CLI property test: ``csv.Error`` escaped as a traceback)."""
+    rows = ["t,lat_deg,lon_deg,h_m", "0,60.48,26.95,20", "1,60.480001,26.95,20",
+            "2,60.480002,26.95,20"]
+    lf = tmp_path / "lf.csv"
+    lf.write_bytes("\n".join(rows).encode())
+    ref = read_gnss_csv(lf)
+    for end in ("\r\n", "\r"):
+        p = tmp_path / "other.csv"
+        p.write_bytes(end.join(rows).encode())
+        got = read_gnss_csv(p)
+        np.testing.assert_array_equal(got.lat, ref.lat)
+        np.testing.assert_array_equal(got.t, ref.t)
+    p = tmp_path / "stray.csv"
+    p.write_bytes(b"\nt,lat_deg,lon_deg,h_m\n\r0\n0,60.48,26.95,20\n1,60.480001,26.95,20\n"
+                  b"2,60.480002,26.95,20\n")
+    with pytest.raises(InputError, match="stray.csv"):
+        read_gnss_csv(p)

@@ -57,6 +57,12 @@ WHITE_TRUST_S = 20.0
 COURSE_MIN_SPEED = 3.0
 #: time offsets searched by the pre-pass, s
 OFFSET_RANGE = 0.6
+#: a course from position differences is used only below this speed, m/s, and where it agrees
+#: with its neighbours' velocity within ``COURSE_MAX_ACCEL`` m/s² (unflagged outliers)
+COURSE_MAX_SPEED = 70.0
+COURSE_MAX_ACCEL = 15.0
+#: course residuals beyond this count as this (a truncated misfit: outliers cannot pull), rad
+COURSE_TRUNCATE = 20.0 * DEG
 
 
 @dataclass
@@ -194,8 +200,13 @@ def estimate_time_offset(imu: ImuData, gnss: GnssData, *, search_s: float = OFFS
         vn = (p[2:, 1] - p[:-2, 1]) / dtk
         t = gnss.t[1:-1]
     speed = np.hypot(ve, vn)
+    # a velocity is plausible when it is a car's and agrees with both neighbours (an
+    # unflagged outlier differenced into a velocity is neither)
+    dv = np.hypot(np.diff(ve), np.diff(vn)) / np.maximum(np.diff(t), 1e-3)
+    smooth = np.r_[dv, np.inf] < COURSE_MAX_ACCEL
+    smooth &= np.r_[np.inf, dv] < COURSE_MAX_ACCEL
     inside = (t > imu.t[0] + search_s + 1.0) & (t < imu.t[-1] - search_s - 1.0)
-    m = (speed > COURSE_MIN_SPEED) & inside
+    m = (speed > COURSE_MIN_SPEED) & (speed < COURSE_MAX_SPEED) & smooth & inside
     if m.sum() < 20:
         return None
     u = imu.f_ib_b.mean(axis=0)
@@ -222,7 +233,7 @@ def estimate_time_offset(imu: ImuData, gnss: GnssData, *, search_s: float = OFFS
         y_c = y - np.bincount(seg, y, nseg)[seg] / count[seg]
         b = float(t_c @ y_c) / max(float(t_c @ t_c), 1e-12)
         r = np.angle(np.exp(1j * (y_c - b * t_c)))
-        return float(np.mean(r * r))
+        return float(np.mean(np.minimum(r * r, COURSE_TRUNCATE**2)))
 
     taus = np.arange(-search_s, search_s + 1e-9, 0.005)
     f = np.array([misfit(x) for x in taus])

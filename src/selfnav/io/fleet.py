@@ -185,7 +185,7 @@ def read_csv_columns(path, required, optional=()):
     """
     path = Path(path)
     text = open_text(path)
-    raw = text.split("\n")
+    raw = re.split(r"\r\n|\r|\n", text)     # Unix, Windows and old Mac line ends
     h = 0
     while h < len(raw) and (not raw[h].strip() or raw[h].lstrip().startswith("#")):
         h += 1
@@ -205,8 +205,12 @@ def read_csv_columns(path, required, optional=()):
     if not keep:
         raise InputError(path, "has a header but no data rows")
     body = "\n".join(raw[k] for k in keep)
-    rows = (list(csv.reader(io.StringIO(body), delimiter=delim)) if delim else
-            [ln.split() for ln in body.split("\n")])
+    try:
+        rows = (list(csv.reader(io.StringIO(body), delimiter=delim)) if delim else
+                [ln.split() for ln in body.split("\n")])
+    except csv.Error as e:
+        raise InputError(path, f"is not a readable CSV ({e}): a quote or a stray control "
+                         "character in a field?") from None
     cols = {}
     for c, (j, _) in found.items():
         cols[c] = [r[j].strip() if j < len(r) else "" for r in rows]
