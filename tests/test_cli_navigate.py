@@ -187,7 +187,7 @@ def test_real_drive_60s_imu_gap_reinitialises(tmp_path, capsys, shared_data):
     import numpy as np
 
     from selfnav import api
-    from selfnav.evaluate import evaluate
+    from selfnav.evaluation import evaluate
     from selfnav.types import Trajectory
 
     d = shared_data / "rtklibexplorer_drive_0708"

@@ -12,7 +12,7 @@ from selfnav.cli import main
 from selfnav.earth import ecef_to_geodetic, geodetic_to_ecef
 from selfnav.errors import SelfnavError
 from selfnav.earth import enu_rotation
-from selfnav.evaluate import error_metrics, evaluate
+from selfnav.evaluation import error_metrics, evaluate
 from selfnav.report import write_report
 from selfnav.types import Trajectory
 from selfnav.io.trajectory import write_truth
@@ -224,7 +224,7 @@ def test_report_with_road_background(tmp_path):
 def test_cli_map_real_osm_extract(tmp_path, capsys):
     """End to end on the packaged real OpenStreetMap extract (Kotka): a simulated drive along
     its longest way, a solution 2 m to the right of the road; --map gives road cross-track 2 m."""
-    from selfnav.evaluate import local_xy
+    from selfnav.evaluation import local_xy
     from selfnav.roads.graph import packaged_map, road_polylines
 
     path = packaged_map("kotka_karhula")

@@ -74,7 +74,7 @@ def test_ekf_road_aid_returns_a_cross_track_constraint(helsinki):
 def test_ekf_with_the_map_holds_the_centre_line():
     """Simulated (labelled): 240 s on the Kotka map, industrial MEMS, σ 10 m GNSS with a 60 s
     white 200 m window; the road aid takes the cross-track RMS well below a metre."""
-    from selfnav.evaluate import evaluate
+    from selfnav.evaluation import evaluate
 
     sim, gd, g = _sim_drive("kotka_karhula", "industrial", 240.0, 60.0, mag=False)
     cfg = ins.FilterConfig.for_grade("industrial")
@@ -149,7 +149,7 @@ def test_consumer_ekf_with_the_map_through_an_outlier_window():
     GNSS with a 90 s white 200 m window, health-checked start. Measured 3.3 m along / 0.49 m
     cross-track RMS (before the line-share test, corner arcs and the level-road prior:
     4.6 / 1.4 m)."""
-    from selfnav.evaluate import evaluate
+    from selfnav.evaluation import evaluate
     from selfnav.ins.align import robust_init
 
     sim, gd, g = _sim_drive("helsinki_centre", "consumer", 300.0, 90.0, mag=True)

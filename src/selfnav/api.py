@@ -13,8 +13,8 @@ import numpy as np
 
 from selfnav import ins
 from selfnav.errors import SelfnavError, SelfnavWarning
-from selfnav.evaluate import evaluate as _evaluate_trajectories
-from selfnav.evaluate import load_road_polylines
+from selfnav.evaluation import evaluate as _evaluate_trajectories
+from selfnav.evaluation import load_road_polylines
 from selfnav.ins import calibrate
 from selfnav.ins.align import robust_init
 from selfnav.io.attitude_file import read_attitude

@@ -47,7 +47,7 @@ def navigation_demo(duration: float = 420.0, seeds=(1, 2, 3)) -> dict:
     Returns the RMS and max over all drives, and the first drive's tracks for the plot.
     """
     from selfnav import ins
-    from selfnav.evaluate import evaluate
+    from selfnav.evaluation import evaluate
     from selfnav.roads.aid import EkfRoadAid
     from selfnav.roads.graph import read_roads
     from selfnav.ins.align import robust_init

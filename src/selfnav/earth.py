@@ -220,10 +220,13 @@ def enu_offset(lat0, lon0, h0, lat, lon, h, ellipsoid: Ellipsoid = WGS84):
         w = math.sqrt(1.0 - ellipsoid.e2 * s2)
         rn = ellipsoid.a / w + h0
         rm = ellipsoid.a * (1.0 - ellipsoid.e2) / (w * w * w) + h0
-        dlon = (lon - lon0 + math.pi) % (2.0 * math.pi) - math.pi      # across ±180° too
+        dlon = lon - lon0
+        if abs(dlon) > math.pi:                 # across ±180° (wrapped only then: exact otherwise)
+            dlon -= 2.0 * math.pi * round(dlon / (2.0 * math.pi))
         return np.array([dlon * rn * math.cos(lat0), (lat - lat0) * rm, h - h0])
     rm, rn = radii(lat0, h0, ellipsoid)
-    dlon = np.mod(np.asarray(lon) - lon0 + np.pi, 2.0 * np.pi) - np.pi
+    dlon = np.asarray(lon) - lon0
+    dlon = np.where(np.abs(dlon) > np.pi, dlon - 2.0 * np.pi * np.round(dlon / (2.0 * np.pi)), dlon)
     return np.stack(np.broadcast_arrays(dlon * rn * np.cos(lat0),
                                         (np.asarray(lat) - lat0) * rm,
                                         np.asarray(h) - h0), axis=-1)

@@ -73,7 +73,7 @@ def error_figure(ev) -> bytes:
 
 def track_figure(ev, roads=None) -> bytes:
     """Truth and solution tracks in local East/North metres, over the road map when given."""
-    from selfnav.evaluate import local_xy
+    from selfnav.evaluation import local_xy
 
     plt = _pyplot()
     lat0, lon0 = ev.truth_lat[0], ev.truth_lon[0]

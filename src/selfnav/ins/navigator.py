@@ -687,7 +687,9 @@ class StreamingNavigator:
                  "ins_widened": self.ins_widened, "reinitialisations": self.reinits,
                  "noise_scale": float(self.flt.q_scale),
                  "bias_noise_scale": float(self.flt.bias_scale),
-                 "shadow_sigma_scale": float(self._shadow_scale())}
+                 "shadow_sigma_scale": float(self._shadow_scale()),
+                 "shadow_variance_ratio": (None if self.adapter is None or not self.adapter.dr_samples
+                                           else float(self.adapter.dr_ratio))}
         fix_log = {k: np.asarray(v) for k, v in self.log.items()}
         fix_log["status"] = np.array([STATUS[c] for c in st], dtype=object)
         return FilterResult(
