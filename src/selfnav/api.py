@@ -27,7 +27,7 @@ from selfnav.roads.graph import RoadGraph, read_roads
 from selfnav.roads.hmm import HmmMatcher
 from selfnav.seed004 import SeedConfig, run_seed
 from selfnav.solution import Solution, read_solution
-from selfnav.types import GnssData, ImuData, Trajectory
+from selfnav.types import GnssData, ImuData, OdometerData, Trajectory
 
 METHODS = ("ekf", "seed")
 #: a run that leaves more of its fixes unused than this warns (one line)
@@ -111,7 +111,7 @@ def navigate(imu: ImuData, gnss: GnssData | None, roads=None, *, method: str = "
              window_test: bool = True, nhc: bool = True, shadows: bool = True,
              mount_states: bool = False, scale_factors: bool | None = None,
              matcher: str = "seed", ins_datum: str = "sk42", declination_deg: float | None = None,
-             init=None, progress=None) -> Solution:
+             init=None, progress=None, odometer: OdometerData | None = None) -> Solution:
     """Navigate a vehicle with an IMU and GNSS, and optionally a road map.
 
     With the defaults the EKF calibrates itself (DESIGN §10; :mod:`selfnav.ins.calibrate`):
@@ -151,6 +151,10 @@ def navigate(imu: ImuData, gnss: GnssData | None, roads=None, *, method: str = "
         from GNSS; then ``gnss`` may be None (free inertial navigation with the vehicle
         constraints).
     progress : callable(fraction), optional
+    odometer : OdometerData, optional
+        Wheel speed on the IMU's clock (shifted with the IMU stamps): the EKF adds the
+        scale-factor state and a forward-speed update; the seed loop takes its travel (13)
+        from it, scaled by a factor it learns from the healthy periods.
 
     Returns
     -------
@@ -173,7 +177,9 @@ def navigate(imu: ImuData, gnss: GnssData | None, roads=None, *, method: str = "
             raise SelfnavError("--method seed needs a road map: --map ROADS (.osm/.osm.pbf)")
         cfg = SeedConfig(matcher=matcher, ins_datum=ins_datum,
                          declination=None if declination_deg is None else np.radians(declination_deg))
-        r = run_seed(imu, gnss, graph, cfg, progress=progress)
+        odo = None if odometer is None else odometer.shifted(
+            float(imu.meta.get("time_offset_s", 0.0)))
+        r = run_seed(imu, gnss, graph, cfg, progress=progress, odometer=odo)
         stats = {k: v for k, v in r.stats.items() if k != "t_start"}
         # the seed loop has no covariance
         return Solution(r.trajectory, None, {}, stats, f"seed ({matcher})", r)
@@ -199,6 +205,8 @@ def navigate(imu: ImuData, gnss: GnssData | None, roads=None, *, method: str = "
         imu = imu.shifted(float(imu_time_offset_s))
         applied += float(imu_time_offset_s)
     cfg, measured, notes = calibrate.calibrated_config(cfg, imu, gnss)
+    if odometer is not None:
+        cfg = cfg.updated(odometer=True)
     if notes and str(grade).lower() != "auto" and config is None:
         warnings.warn(f"the IMU is noisier than the '{grade}' preset says ({'; '.join(notes)}): "
                       "using the measured noise", SelfnavWarning, stacklevel=2)
@@ -212,7 +220,8 @@ def navigate(imu: ImuData, gnss: GnssData | None, roads=None, *, method: str = "
         # at start-up must not seed the navigator hundreds of metres off)
         start = robust_init(imu, gnss, cfg=cfg)
     res = ins.run_filter(imu, gnss, cfg, init=start, smooth=smooth, progress=progress,
-                         road_aid=aid)
+                         road_aid=aid,
+                         odometer=None if odometer is None else odometer.shifted(applied))
     # without a given lever arm, the antenna is the point the data defines (the lever arm is
     # an estimate); rows at true time (the residual time-offset state)
     point = "antenna" if cfg.states.lever_arm else "imu"
@@ -230,6 +239,8 @@ def navigate(imu: ImuData, gnss: GnssData | None, roads=None, *, method: str = "
     stats["noise"] = {"grade": cfg.imu.grade, "arw_deg_per_sqrt_h": float(np.degrees(cfg.imu.arw) * 60),
                       "vrw_m_per_s_per_sqrt_h": float(cfg.imu.vrw * 60),
                       "still_s": measured.still_s, "raised": notes}
+    if res.odometer_scale is not None and len(res.odometer_scale):
+        stats["odometer_scale_factor"] = float(res.odometer_scale[-1])
     if res.mounting is not None and len(res.mounting):
         stats["mounting_deg"] = [float(x) for x in np.degrees(res.mounting[-1])]
     st = res.fix_log["status"]

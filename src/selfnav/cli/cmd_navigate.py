@@ -35,6 +35,15 @@ def _magnetometer(imu, mag_path: Path | None):
     return imu
 
 
+def _odometer(imu_path: Path, odo_path: Path | None):
+    """Wheel speed from ``--odometer`` or the ``speed_mps`` column of the IMU CSV (or None)."""
+    from selfnav.io.odometer import has_odometer, read_odometer
+
+    if odo_path is not None:
+        return read_odometer(odo_path)
+    return read_odometer(imu_path) if has_odometer(imu_path) else None
+
+
 def register(app: typer.Typer) -> None:
     @app.command("navigate")
     def navigate_cmd(
@@ -84,6 +93,9 @@ def register(app: typer.Typer) -> None:
             None, help="Magnetic declination, deg (default: field model at the start)."),
         mag: Optional[Path] = typer.Option(None, "--mag", help="Magnetometer CSV t,mx,my,mz "
                                            "(default: mx,my,mz columns of the IMU CSV)."),
+        odometer: Optional[Path] = typer.Option(None, "--odometer", help="Wheel speed CSV "
+                                                "t,speed_mps on the IMU clock (default: the "
+                                                "speed_mps column of the IMU CSV, if any)."),
         as_json: bool = typer.Option(False, "--json", help="Print one JSON object."),
     ):
         """Navigate with an IMU and GNSS; survives unflagged GNSS outliers (window test)."""
@@ -94,6 +106,7 @@ def register(app: typer.Typer) -> None:
             raise SelfnavError("navigate needs --gnss FILE (or an initial state: --init FILE)")
         g = api.read_gnss(gnss, gnss_format, gnss_datum) if gnss is not None else None
         graph = api.read_roads(map_) if map_ is not None else None
+        odo = _odometer(imu, odometer)
         t0 = time.perf_counter()
         progress = bar = None
         if not as_json and sys.stderr.isatty():
@@ -111,7 +124,8 @@ def register(app: typer.Typer) -> None:
                                window_test=window_test, nhc=nhc, shadows=shadows,
                                mount_states=mount_states, scale_factors=scale_factors or None,
                                matcher=matcher, ins_datum=ins_datum,
-                               declination_deg=declination_deg, init=init, progress=progress)
+                               declination_deg=declination_deg, init=init, progress=progress,
+                               odometer=odo)
         finally:
             if bar is not None:
                 bar.stop()
