@@ -438,7 +438,8 @@ class InsGnssFilter:
             R = R * (q / CHI2_1_999)
         return self.kalman(r, H, R)
 
-    def update_road(self, normal_n, offset, sigma, heading=None, sigma_heading=None):
+    def update_road(self, normal_n, offset, sigma, heading=None, sigma_heading=None, *,
+                    along_n=None, along_offset=None, sigma_along=None, gate=True):
         """Road constraint: the vehicle is on the road centre line (and heads along it).
 
         Parameters
@@ -450,8 +451,15 @@ class InsGnssFilter:
             σ of the true offset (half a lane, or the road's width), m.
         heading, sigma_heading : float, optional
             Road direction of travel (rad, clockwise from North) and its σ.
+        along_n, along_offset, sigma_along : optional
+            A position along the road too (a corner the map places,
+            :mod:`selfnav.roads.corners`): unit direction, signed offset of the INS from it
+            along that direction (m) and its σ.
+        gate : bool
+            χ² gate (0.999) on the whole update; False for a constraint whose caller has
+            judged it by other means.
 
-        Returns the error-state correction (gated at χ² 0.999).
+        Returns the error-state correction.
         """
         rows, res, var = [], [], []
         h = np.zeros(self.nx)
@@ -459,6 +467,12 @@ class InsGnssFilter:
         rows.append(h)
         res.append(offset)
         var.append(sigma**2)
+        if along_n is not None:
+            h1 = np.zeros(self.nx)
+            h1[0:2] = along_n
+            rows.append(h1)
+            res.append(along_offset)
+            var.append(sigma_along**2)
         if heading is not None:
             _, _, hdg = att.euler_from_dcm_nb(self.ins.C_nb)
             h2 = np.zeros(self.nx)
@@ -466,8 +480,10 @@ class InsGnssFilter:
             rows.append(h2)
             res.append(float(np.angle(np.exp(1j * (hdg - heading)))))
             var.append(sigma_heading**2)
+        if not gate:
+            return self.kalman(np.array(res), np.array(rows), np.diag(var))
         return self._gated(np.array(res), np.array(rows), np.diag(var),
-                           CHI2_2_999 if len(res) == 2 else CHI2_1_999)
+                           {1: CHI2_1_999, 2: CHI2_2_999}.get(len(res), CHI2_3_999))
 
     def update_zupt(self):
         H = np.zeros((3, self.nx))

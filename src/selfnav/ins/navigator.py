@@ -398,6 +398,10 @@ class StreamingNavigator:
         linked, anchored = self._chain(k)
         r, H = flt.position_residual(fx.lat, fx.lon, fx.h)
         self.innov[k] = -r
+        veto = getattr(self.road_aid, "fix_veto", None)
+        veto = veto(fx.t, fx.lat, fx.lon, fx.sigma_file, flt) if veto is not None else None
+        if veto:
+            return self._vetoed(k, veto)
         R = np.diag([fx.sigma_h**2, fx.sigma_h**2, fx.sigma_v**2])
         S = H @ flt.P @ H.T + R
         nis_h = float(r[:2] @ np.linalg.solve(S[:2, :2], r[:2]))
@@ -474,6 +478,22 @@ class StreamingNavigator:
         if fx.velocity_n is not None and cfg.gnss.use_velocity:
             dx = dx + self._velocity(k)
         return dx
+
+    def _vetoed(self, k, reason):
+        """A fix the road aid objects to (:meth:`selfnav.roads.aid.EkfRoadAid.fix_veto`):
+        rejected like one the gates reject, and it may neither re-acquire nor re-initialise."""
+        out = self.cfg.outliers
+        if out.robust:
+            self.win = (self.win + [(k, self.disp.copy())])[-out.window:]
+        self._last_used = False
+        self.rejections += 1
+        self.streak = 0
+        self._lost_since = None       # the map holds the INS: not lost
+        self._log(k, 0, reason)
+        if out.robust and self.rejections >= out.suspect_after and not self.suspect:
+            self._enter_suspect(self.fixes[k].t)
+        self.mode[k] = int(self.suspect)
+        return np.zeros(self.flt.nx)
 
     def _velocity(self, k):
         """The fix's velocity, gated on its own (a position outlier may carry a good velocity)."""

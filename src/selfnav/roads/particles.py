@@ -321,6 +321,14 @@ class RoadParticles:
         r = np.sqrt(2.0) * s
         return bool(np.median(self._steps) < 1.5 * 1.18 * r and self._steps[-1] < 3.0 * r)
 
+    def reset_health(self, healthy_history: bool = False):
+        """Start the GNSS health test again (after a fix that must not count): with
+        ``healthy_history`` the window is pre-filled with nominal steps (a start that follows
+        a run of fixes already judged healthy), else the next ``health_window`` fixes decide."""
+        self._prev_fix = None
+        self._steps = [0.0] * (self.cfg.health_window - 1) if healthy_history else []
+        self.healthy = False
+
     def update_gnss(self, xy, sigma=None):
         """Weigh by one GNSS fix (local m) when GNSS is healthy (:meth:`gnss_health`, the
         robust likelihood then guards the rest); re-seed when lost (module docstring).
