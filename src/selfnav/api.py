@@ -22,7 +22,7 @@ from selfnav.io.readers import read_gnss, read_imu, read_imu_positions
 from selfnav.latitude import LatitudeResult
 from selfnav.latitude import estimate_latitude as _estimate_latitude
 from selfnav.latitude import estimate_latitude_multiposition
-from selfnav.roads.aid import EkfRoadAid
+from selfnav.roads.aid import EkfRoadAid, start_on_roads
 from selfnav.roads.graph import RoadGraph, read_roads
 from selfnav.roads.hmm import HmmMatcher
 from selfnav.seed004 import SeedConfig, run_seed
@@ -217,8 +217,10 @@ def navigate(imu: ImuData, gnss: GnssData | None, roads=None, *, method: str = "
         start = initial_state(init, imu, cfg)
     else:
         # start only after a run of fixes that look healthy without an INS (an outlier window
-        # at start-up must not seed the navigator hundreds of metres off)
-        start = robust_init(imu, gnss, cfg=cfg)
+        # at start-up must not seed the navigator hundreds of metres off); with a map, fixes
+        # that also lie on its roads (a smooth drift from power-on looks healthy)
+        start = (start_on_roads(imu, gnss, graph, cfg) if graph is not None
+                 else robust_init(imu, gnss, cfg=cfg))
     res = ins.run_filter(imu, gnss, cfg, init=start, smooth=smooth, progress=progress,
                          road_aid=aid,
                          odometer=None if odometer is None else odometer.shifted(applied))

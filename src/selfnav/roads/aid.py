@@ -10,10 +10,69 @@ from __future__ import annotations
 
 import numpy as np
 
+from selfnav.ins.align import robust_init
 from selfnav.ins.config import CHI2_2_999, CHI2_2_9999
 from selfnav.roads.corners import corner_candidates, line_intersection
 from selfnav.roads.graph import RoadGraph
 from selfnav.roads.particles import TWO_PI, MatcherConfig, RoadParticles, wrap
+
+
+def start_on_roads(imu, gnss, graph: RoadGraph, cfg=None, *, span=30.0, far_sigmas=2.0,
+                   max_far=0.15, sigma=10.0):
+    """The navigator's start (:func:`selfnav.ins.align.robust_init`) checked against the map.
+
+    ``robust_init`` waits for a run of fixes that look healthy by themselves; a receiver that
+    drifts smoothly from power-on passes that test (its second differences are small) and the
+    in-motion alignment takes its drift rate for velocity — tens of degrees of heading at
+    walking speed. The map sees it: the fixes from 10 s before the start to ``span`` s after
+    must lie on roads that run the way they move (the course of a line through the fixes
+    within ±4 s, where faster than 3 m/s, within 30° of the road's direction), at most
+    ``max_far`` of them farther than ``far_sigmas`` fix σ from every such road (a nominal fix:
+    about 5 %). If not, the start is tried again after that span (up to 20 times); with no
+    start that passes, the first one is kept.
+    """
+    sig = np.asarray(gnss.sigma_m, float) if gnss.sigma_m is not None else \
+        np.full(len(gnss.t), np.nan)
+    sig = np.where(np.isfinite(sig), sig, sigma)
+    x, y = graph.to_local(gnss.lat, gnss.lon)
+    xy = np.column_stack([x, y])
+    first = None
+    t_from = -np.inf
+    for _ in range(20):
+        sub = gnss.select(gnss.t >= t_from)
+        if len(sub) < 25:
+            break
+        init = robust_init(imu, sub, cfg=cfg)
+        first = first or init
+        t0 = float(init["t"])
+        idx = np.flatnonzero((gnss.t >= t0 - 10.0) & (gnss.t <= t0 + span))
+        if len(idx) < 5 or np.mean(_off_roads(graph, gnss.t, xy, idx, far_sigmas * sig)) \
+                <= max_far:
+            return init
+        t_from = t0 + span
+    return first if first is not None else robust_init(imu, gnss, cfg=cfg)
+
+
+def _off_roads(graph, t, xy, idx, radius):
+    """For fixes ``idx``: is no road running their way within ``radius`` (see
+    :func:`start_on_roads`)?"""
+    import shapely
+
+    course = np.full(len(idx), np.nan)
+    for j, k in enumerate(idx):
+        m = np.abs(t - t[k]) <= 4.0
+        if m.sum() >= 5:
+            tt = t[m] - t[k]
+            v = np.polyfit(tt, xy[m], 1)[0]
+            if np.hypot(*v) > 3.0:
+                course[j] = np.arctan2(v[0], v[1])
+    q, si = graph.tree.query(shapely.points(xy[idx]), predicate="dwithin",
+                             distance=radius[idx])
+    ok = np.isnan(course[q]) | (np.abs(wrap(graph.seg_heading[si] - course[q]))
+                                < np.radians(30.0))
+    on = np.zeros(len(idx), bool)
+    on[q[ok]] = True
+    return ~on
 
 
 def _heading_of(C_nb):
@@ -65,13 +124,15 @@ class EkfRoadAid:
     lock_m : the filter is on the road when its last constraint found it within this, m
     max_veto : s after which the check stops objecting (an outlier episode is shorter)
     sigma_corner : σ of a corner fix along and across the road, m (:meth:`_corner_fix`)
+    q_along : (m/s)²/s, along-track speed variance added while the cloud judges GNSS
+        unhealthy (:meth:`_widen_along`; None: off)
     """
 
     def __init__(self, graph: RoadGraph, gnss, cfg: MatcherConfig | None = None, *,
                  sigma_cross=1.0, sigma_arc=1.0, sigma_heading=np.radians(5.0), interval=1.0,
                  agree_m=10.0, arc_agree_m=4.0, bend_zone=25.0, grade_sigma=0.08, seed=0,
                  veto_window=10.0, veto_min_m=12.0, lock_m=5.0, max_veto=330.0,
-                 sigma_corner=2.5):
+                 sigma_corner=2.5, q_along=0.01):
         self.g = graph
         self.pf = RoadParticles(graph, cfg, seed)
         x, y = graph.to_local(gnss.lat, gnss.lon)
@@ -100,6 +161,7 @@ class EkfRoadAid:
         self.corner = self._corner_nodes()
         self.counts = {"line": 0, "leg": 0, "arc": 0, "grade": 0, "veto": 0, "corner": 0}
         self.sigma_corner = sigma_corner
+        self.q_along = q_along
         self.track = []            # (t, heading, position) of the filter, recent seconds
         self.turn = None           # the turn being driven: {"t0", "t_calm"}
         self.corner_log = []       # (t, correction E, N) of each corner fix
@@ -245,6 +307,7 @@ class EkfRoadAid:
         elif not turning:
             self.radii = []
         corner = self._corner_fix(t, flt, p_ins, hdg, turning, speed)
+        self._widen_along(flt, hdg, dt)
         pf.predict(speed * dt, hdg, dt)
         while self.k < len(self.fix_t) and self.fix_t[self.k] <= t:
             if float(self.fix_t[self.k]) in self.vetoed:
@@ -322,6 +385,20 @@ class EkfRoadAid:
         else:
             out["sigma_heading"] = self.sigma_heading
         return out
+
+    def _widen_along(self, flt, hdg, dt):
+        """Along-track speed variance ``q_along·dt`` while GNSS is unhealthy (the cloud's test).
+
+        The filter does not model the IMU's axis misalignment: through the turns of a drive a
+        consumer part's 1 % cross-coupling tilts the INS by tenths of a degree, which without
+        GNSS leaks into the along-track speed (0.03–0.05 m/s² measured on the simulated
+        drives, 4σ beyond the filter's velocity σ). Widened, the filter takes the corners and
+        arcs that correct it instead of refusing them at its gates.
+        """
+        if self.q_along is None or self.pf.healthy or dt <= 0:
+            return
+        u = np.array([np.sin(hdg), np.cos(hdg)])
+        flt.P[3:5, 3:5] += np.outer(u, u) * (self.q_along * dt)
 
     # ------------------------------------------------------------------ corners
     def _corner_fix(self, t, flt, p_ins, hdg, turning, speed):
