@@ -55,9 +55,10 @@ Gaps the seed leaves, filled and said so here:
 **Odometer** (beyond the seed, optional): with wheel speed the mean speed of (11) is the
 odometer's over the period, divided by ``1 + k̂``, and the speed of the reset (14) is the
 odometer's at the end of the period (the direction stays (14)'s). ``k̂``, the odometer's
-scale-factor error, is the ratio of the odometer distance to the identified distance along the
-road over the healthy periods (once ``odo_learn_m`` metres are behind; the loop has no filter
-state for it).
+scale-factor error, is fitted by least squares to the healthy fixes: their displacement from
+the first healthy fix against the odometer's travel integrated along the road course since,
+``Δz ≈ Δo / (1 + k)`` (once ``odo_learn_m`` metres are behind; the loop has no filter state for
+it, and the identified positions, which follow the odometer's own prediction, cannot tell).
 """
 from __future__ import annotations
 
@@ -251,7 +252,9 @@ def run_seed(imu, gnss, graph: RoadGraph, cfg: SeedConfig | None = None, *, gnss
     drift = []           # speed corrections of the healthy periods, m/s
     last_fix = []        # the last 22 fixes (map plane), for the INS-free health test
     odo_k = 0.0          # odometer scale-factor error estimate
-    odo_sum = np.zeros(2)  # odometer and identified distance over the healthy periods, m
+    odo_vec = np.zeros(2)  # odometer travel integrated along the road course, m
+    odo_ref = None       # (odometer vector, fix) of the first healthy fix
+    odo_sum = np.zeros(2)  # Σ Δz·Δo and Σ Δo·Δo over the healthy fixes
     for n_fix, k in enumerate(fix_idx):
         j = int(np.searchsorted(imu.t, gnss.t[k], side="right"))
         if j - i_imu < 1:
@@ -395,11 +398,15 @@ def run_seed(imu, gnss, graph: RoadGraph, cfg: SeedConfig | None = None, *, gnss
                 s_fix = max(s_ins + float(np.mean(drift)), 0.0)
                 vE, vN = vE * s_fix / s_new, vN * s_fix / s_new
         if odometer is not None:
-            if ok and n_fix > 0:     # learn the scale from the identified travel along the road
-                odo_sum += (T_M * dV_raw, float(np.dot(np.asarray(p_new) - p_prev,
-                                                       [np.sin(K_road), np.cos(K_road)])))
-                if odo_sum[1] > cfg.odo_learn_m:
-                    odo_k = float(np.clip(odo_sum[0] / odo_sum[1] - 1.0, -0.1, 0.1))
+            odo_vec += T_M * dV_raw * np.array([np.sin(K_road), np.cos(K_road)])
+            if ok and n_fix > 0:     # learn the scale from the healthy fixes
+                if odo_ref is None:
+                    odo_ref = (odo_vec.copy(), np.asarray(z, float).copy())
+                else:
+                    d_o, d_z = odo_vec - odo_ref[0], np.asarray(z, float) - odo_ref[1]
+                    odo_sum += (float(d_z @ d_o), float(d_o @ d_o))
+                    if np.hypot(*d_o) > cfg.odo_learn_m and odo_sum[0] > 0:
+                        odo_k = float(np.clip(odo_sum[1] / odo_sum[0] - 1.0, -0.1, 0.1))
             s_end = float(v_odo[-1]) / (1.0 + odo_k)
             s_new = float(np.hypot(vE, vN))
             if s_new > 0.5:

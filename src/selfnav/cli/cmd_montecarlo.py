@@ -40,6 +40,7 @@ def register(app: typer.Typer) -> None:
         list_: bool = typer.Option(False, "--list", help="List the scenarios and parameters."),
     ):
         """Error statistics of a method over N seeded simulations against its own sigma."""
+        from selfnav import campaigns  # noqa: F401  (registers the pairs that run the API)
         from selfnav import montecarlo as mc
 
         if list_:
