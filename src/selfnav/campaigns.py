@@ -133,7 +133,7 @@ def run_roadnav(seed: int, params: dict) -> dict:
         "map": spec["scenario"]["map"], "sim_seed": sim_seed,
         "windows": "; ".join(f"{w.start:.0f}+{w.duration:.0f} s {w.kind}" for w in wins),
         "startup_window": bool(wins and wins[0].start == 0.0),
-        "kinds": ",".join(w.kind for w in wins),
+        "kinds": "+".join(w.kind for w in wins),
         "along_rms_m": m["road_along_track_rms_m"], "cross_rms_m": m["road_cross_track_rms_m"],
         "along_max_m": m["road_along_track_max_m"], "cross_max_m": m["road_cross_track_max_m"],
         "along_heading_rms_m": m["along_track_rms_m"],

@@ -123,6 +123,7 @@ class EkfRoadAid:
     veto_min_m : the smallest mean offset across the road it objects to, m
     lock_m : the filter is on the road when its last constraint found it within this, m
     max_veto : s after which the check stops objecting (an outlier episode is shorter)
+    release_s : s the fixes must sit still against the filter, on a road, to end an objection
     sigma_corner : σ of a corner fix along and across the road, m (:meth:`_corner_fix`)
     q_along : (m/s)²/s, along-track speed variance added while the cloud judges GNSS
         unhealthy (:meth:`_widen_along`; None: off)
@@ -131,7 +132,7 @@ class EkfRoadAid:
     def __init__(self, graph: RoadGraph, gnss, cfg: MatcherConfig | None = None, *,
                  sigma_cross=1.0, sigma_arc=1.0, sigma_heading=np.radians(5.0), interval=1.0,
                  agree_m=10.0, arc_agree_m=4.0, bend_zone=25.0, grade_sigma=0.08, seed=0,
-                 veto_window=10.0, veto_min_m=12.0, lock_m=5.0, max_veto=330.0,
+                 veto_window=10.0, veto_min_m=12.0, lock_m=5.0, max_veto=330.0, release_s=60.0,
                  sigma_corner=2.5, q_along=0.01):
         self.g = graph
         self.pf = RoadParticles(graph, cfg, seed)
@@ -174,6 +175,7 @@ class EkfRoadAid:
         self.vetoed = set()        # times of the fixes objected to
         self.t_veto = -np.inf
         self.max_veto = max_veto
+        self.release_s = release_s
 
     def _corner_nodes(self):
         """Per segment: does it end (start) in a bend of more than 20° on some way on?"""
@@ -490,14 +492,16 @@ class EkfRoadAid:
         whether or not the cloud gives a constraint at that moment, and a drift that crosses
         another road or turns along it does not end it — until the fixes come back (the line
         within ``veto_min_m / 2``), scatter like white outliers, or sit still against the
-        filter for 20 s (slope below ``0.3 m/s + 2σ``) on a road of the filter's direction
-        (then the filter, not the fixes, is off: they decide), or ``max_veto`` s pass.
+        filter for ``release_s`` (slope below ``0.3 m/s + 2σ``) on a road of the filter's
+        direction (then the filter, not the fixes, is off: they decide), or ``max_veto`` s
+        pass. (A drift moves at σ/τ, 3.3 m/s for 200 m and 60 s; over 20 s it sat still on a
+        road of a grid now and then: Helsinki, seen.)
         """
         ins = flt.ins
         x, y = self.g.to_local(ins.lat, ins.lon)
         zx, zy = self.g.to_local(lat, lon)
         d = np.array([float(zx) - float(x), float(zy) - float(y)])
-        self.across = [a for a in self.across if a[0] > t - 2.0 * self.veto_window] + [(t, d)]
+        self.across = [a for a in self.across if a[0] > t - self.release_s] + [(t, d)]
         locked = self.lock is not None and t - self.lock[0] <= 5.0
         if not (self.vetoing or locked):
             return None
@@ -548,9 +552,10 @@ class EkfRoadAid:
                                          < np.radians(30.0)))
 
     def _still_on_a_road(self, t, p, hdg, sigma):
-        """Have the fixes sat still against the filter for 20 s, on a road of its direction?"""
-        D = [a for a in self.across if a[0] > t - 2.0 * self.veto_window]
-        if len(D) < 15 or t - D[0][0] < 0.9 * 2.0 * self.veto_window:
+        """Have the fixes sat still against the filter for ``release_s``, on a road of its
+        direction?"""
+        D = [a for a in self.across if a[0] > t - self.release_s]
+        if len(D) < 0.75 * self.release_s or t - D[0][0] < 0.9 * self.release_s:
             return False
         tt = np.array([a[0] for a in D]) - t
         X = np.array([a[1] for a in D])
