@@ -12,7 +12,6 @@ import argparse
 import time
 
 from selfnav import ins
-from selfnav.types import GnssData
 from selfnav.roads.hmm import match_gnss
 from selfnav.roads.aid import EkfRoadAid
 from selfnav.roads.graph import read_roads

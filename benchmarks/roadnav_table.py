@@ -24,7 +24,6 @@ import numpy as np
 from selfnav import sensors
 from selfnav import ins
 from selfnav.evaluate import evaluate
-from selfnav.types import GnssData
 from selfnav.roads.hmm import match_gnss
 from selfnav.roads.aid import EkfRoadAid
 from selfnav.roads.graph import project_to_polyline, read_roads

@@ -11,8 +11,8 @@ from selfnav.simulate.static import static_imu
 DEGH = np.pi / 180 / 3600
 
 
-def _write_imu(path, imu, **override):
-    cols = {"t": imu.t, "wx": imu.omega_ib_b[:, 0], "wy": imu.omega_ib_b[:, 1],
+def _write_imu(path, imu, t=None, **override):
+    cols = {"t": imu.t if t is None else t, "wx": imu.omega_ib_b[:, 0], "wy": imu.omega_ib_b[:, 1],
             "wz": imu.omega_ib_b[:, 2], "fx": imu.f_ib_b[:, 0], "fy": imu.f_ib_b[:, 1],
             "fz": imu.f_ib_b[:, 2]}
     cols.update(override)
@@ -144,3 +144,41 @@ def test_no_partial_output_on_error(tmp_path):
     with pytest.raises(ValueError):
         wc(target, {"a": np.arange(3), "b": np.arange(4)})
     assert not target.exists() and list(tmp_path.iterdir()) == []
+
+
+# ---------------------------------------------------------------- issue 12: real-world files
+def test_gap_uses_the_longest_stretch_and_says_so(tmp_path, imu, capsys):
+    t = imu.t.copy()
+    t[400:] += 3 * 3600.0           # 3 h without rows after 40 s
+    p = _write_imu(tmp_path / "gap.csv", imu, t=t)
+    code, out, err = run(["latitude", p, "--json"], capsys)
+    assert code == 0, err
+    d = json.loads(out)
+    assert d["samples"] == 800 and d["duration_s"] == pytest.approx(80.0)
+    gap = [ln for ln in err.splitlines() if "IMU gap" in ln]
+    assert len(gap) == 1 and gap[0].startswith("selfnav: warning:")
+    assert "a 3 h IMU gap at t = 40.000 s" in gap[0] and "longest gap-free stretch" in gap[0]
+    assert abs(d["latitude_deg"] - 48.0) < 4 * d["sigma_deg"]
+
+
+def test_requirements_latitude_out_of_range_is_one_line(capsys):
+    line = _expect_error(capsys, ["latitude", "--requirements", "--lat-deg", "95"], "--lat-deg")
+    assert line.startswith("selfnav: error:") and "90" in line
+
+
+def test_seed_formula_without_solution_is_one_line_not_90_degrees(tmp_path, capsys):
+    from selfnav import api
+
+    # a tactical record whose gyro bias pushes (ω·f)/(Ω g) past 1 (seed 7, found by search)
+    api.simulate_files("static", tmp_path / "s", seed=7, grade="tactical", duration=120.0)
+    p = tmp_path / "s" / "imu.csv"
+    line = _expect_error(capsys, ["latitude", p, "--method", "seed"], "imu.csv",
+                         "no solution", "--method optimal")
+    assert "e+" not in line
+    # the optimal method on the same record: an honest, capped σ and a warning
+    code, out, err = run(["latitude", p, "--json"], capsys)
+    assert code == 0
+    d = json.loads(out)
+    assert d["sigma_deg"] <= 90.0 and abs(d["latitude_deg"] - 50.45) < 2 * d["sigma_deg"]
+    assert "Earth rate" in err and all(ln.startswith("selfnav: warning:")
+                                       for ln in err.strip().splitlines())

@@ -72,11 +72,11 @@ def test_navigate_bad_input(sim, tmp_path, capsys):
     _err(capsys, ["navigate", "--imu", tmp_path / "none.csv", "--gnss", gnss, "--out", out],
          "none.csv", "no such file")
     _err(capsys, ["navigate", "--imu", imu, "--gnss", gnss, "--out", out, "--method", "kalman"],
-         "unknown method")
+         "'--method'", "kalman", "ekf, seed")
     _err(capsys, ["navigate", "--imu", imu, "--gnss", gnss, "--out", out, "--lever-arm", "1,2"],
          "--lever-arm")
     _err(capsys, ["navigate", "--imu", imu, "--gnss", gnss, "--out", out, "--grade", "superb"],
-         "unknown grade")
+         "'--grade'", "superb", "consumer")
     # GNSS on another time base (seconds of week vs seconds of day)
     lines = gnss.read_text().splitlines()
     shifted = tmp_path / "shifted.csv"
@@ -96,3 +96,150 @@ def test_navigate_bad_input(sim, tmp_path, capsys):
     rad.write_text("t,lat_deg,lon_deg,h_m\n0,1.05,0.47,10\n1,1.05,0.47,10\n")
     code, _, err = run(["navigate", "--imu", imu, "--gnss", rad, "--out", out], capsys)
     assert code == 2 and len(err.strip().splitlines()) == 1
+
+
+# ---------------------------------------------------------------- issue 12: real-world files
+def _cut_rows(src, dst, t0, t1):
+    """Copy a CSV without its data rows whose first column lies in [t0, t1)."""
+    out = []
+    for ln in src.read_text().splitlines():
+        if ln[:1].isdigit() or ln[:1] == "-":
+            if t0 <= float(ln.split(",", 1)[0]) < t1:
+                continue
+        out.append(ln)
+    dst.write_text("\n".join(out) + "\n")
+    return dst
+
+
+@pytest.mark.parametrize("length", [5.0, 60.0])
+def test_imu_gap_is_named_in_one_line(sim, tmp_path, capsys, length):
+    imu = _cut_rows(sim / "imu.csv", tmp_path / "imu_gap.csv", 70.0, 70.0 + length)
+    code, out, err = run(["navigate", "--imu", imu, "--gnss", sim / "gnss.csv", "--out",
+                          tmp_path / "sol.csv", "--json"], capsys)
+    assert code == 0, err
+    gap = [ln for ln in err.splitlines() if "gap" in ln]
+    assert len(gap) == 1 and gap[0].startswith("selfnav: warning:"), err
+    assert f"a {length:g} s IMU gap at t = 69.990 s" in gap[0]
+
+
+def test_short_imu_gaps_are_bridged_silently(sim, tmp_path, capsys):
+    imu = _cut_rows(sim / "imu.csv", tmp_path / "imu_drop.csv", 70.0, 70.03)   # 3 samples
+    code, out, err = run(["navigate", "--imu", imu, "--gnss", sim / "gnss.csv", "--out",
+                          tmp_path / "sol.csv", "--json"], capsys)
+    assert code == 0 and "gap" not in err
+
+
+def test_two_sample_imu_is_one_clean_line(sim, tmp_path, capsys):
+    lines = (sim / "imu.csv").read_text().splitlines()
+    head = [ln for ln in lines if not ln[:1].isdigit()]
+    two = tmp_path / "two.csv"
+    two.write_text("\n".join(head + [ln for ln in lines if ln[:1].isdigit()][:2]) + "\n")
+    _err(capsys, ["navigate", "--imu", two, "--gnss", sim / "gnss.csv", "--out",
+                  tmp_path / "o.csv"], "two.csv", "2 samples", "navigate needs at least")
+
+
+def test_map_of_another_city_is_refused_like_match(sim, tmp_path, capsys):
+    from selfnav.roads.graph import packaged_map
+
+    _err(capsys, ["navigate", "--imu", sim / "imu.csv", "--gnss", sim / "gnss.csv", "--map",
+                  packaged_map("helsinki_centre"), "--out", tmp_path / "o.csv"],
+         "helsinki_centre", "none of the", "GNSS fixes")
+    assert not (tmp_path / "o.csv").exists()
+
+
+def test_output_places(sim, tmp_path, capsys):
+    import os
+    import stat
+
+    base = ["navigate", "--imu", sim / "imu.csv", "--gnss", sim / "gnss.csv"]
+    (tmp_path / "afile").write_text("x")
+    (tmp_path / "adir").mkdir()
+    fifo = tmp_path / "fifo"
+    os.mkfifo(fifo)
+    for out, needle in ((tmp_path / "adir", "is a folder"), (fifo, "special file"),
+                        (tmp_path / "afile" / "x.csv", "is a file, not a folder"),
+                        ("/dev/null", "special file"),
+                        ("/proc/selfnav.csv", "cannot create a file")):
+        _err(capsys, base + ["--out", out], needle)
+    assert stat.S_ISFIFO(os.stat(fifo).st_mode) and stat.S_ISCHR(os.stat("/dev/null").st_mode)
+    real = tmp_path / "real.csv"
+    link = tmp_path / "link.csv"
+    link.symlink_to(real)
+    code, _, err = run(base + ["--out", link, "--json"], capsys)
+    assert code == 0, err
+    assert link.is_symlink() and real.stat().st_size > 1000
+    assert stat.S_IMODE(real.stat().st_mode) == 0o666 & ~_umask()
+
+
+def _umask():
+    from selfnav.io.output import umask
+
+    return umask()
+
+
+@pytest.mark.slow
+def test_real_drive_60s_imu_gap_reinitialises(tmp_path, capsys, shared_data):
+    """Issue 12 acceptance: 60 s of IMU rows cut from the real drive (RTK as truth): error at
+    most 5 m outside the gap and the 30 s after it, no solution row inside the gap, and one
+    stderr line naming the gap."""
+    import shutil
+
+    import numpy as np
+
+    from selfnav import api
+    from selfnav.evaluate import evaluate
+    from selfnav.types import Trajectory
+
+    d = shared_data / "rtklibexplorer_drive_0708"
+    rows = (d / "imu_1934.csv").read_text().splitlines()
+    ticks = np.array([float(r.split(",")[6]) for r in rows])
+    t_cut = ticks[1] + 200e3                       # 200 s into the drive (ms counter)
+    keep = ~((ticks >= t_cut) & (ticks < t_cut + 60e3))
+    imu = tmp_path / "imu_gap.csv"
+    imu.write_text("\n".join(r for r, k in zip(rows, keep) if k) + "\n")
+    shutil.copyfile(d / "imu_1934.csv.tag", tmp_path / "imu_gap.csv.tag")
+    sol = tmp_path / "sol.csv"
+    code, out, err = run(["navigate", "--imu", imu, "--gnss", d / "gnss_1934_sf.pos",
+                          "--out", sol], capsys)
+    assert code == 0, err
+    assert len([ln for ln in err.splitlines() if "gap" in ln]) == 1, err
+    data = api.read_imu(imu)
+    g = api.read_gnss(d / "gnss_1934_sf.pos")
+    gap = api.imu_gaps(data, 6)[0]
+    s = api.read_solution(sol)
+    inside = (s.t > gap.t_before) & (s.t < gap.t_after)
+    assert not inside.any(), f"{inside.sum()} solution rows inside the gap"
+    n = len(g.t)
+    truth = Trajectory(g.t, g.lat, g.lon, g.h, np.full((n, 3), np.nan),
+                       np.full((n, 3, 3), np.nan), "RTK")
+    ev = evaluate(truth, s.trajectory)
+    after = (ev.t > gap.t_before) & (ev.t < gap.t_after + 30.0)
+    assert ev.horizontal[~after].max() <= 5.0
+
+
+def _shift_after(src, dst, t0, dt):
+    out = []
+    for ln in src.read_text().splitlines():
+        if ln[:1].isdigit():
+            p = ln.split(",")
+            if float(p[0]) >= t0:
+                p[0] = f"{float(p[0]) + dt:.6f}"
+            ln = ",".join(p)
+        out.append(ln)
+    dst.write_text("\n".join(out) + "\n")
+    return dst
+
+
+def test_three_hour_gap_is_never_a_traceback(sim, tmp_path, capsys):
+    """IMU and GNSS both resume 3 h later (the issue's LinAlgError traceback): a result, or one
+    error line naming the gap (until the navigator re-initialises after gaps)."""
+    imu = _shift_after(sim / "imu.csv", tmp_path / "imu.csv", 60.0, 3 * 3600.0)
+    gnss = _shift_after(sim / "gnss.csv", tmp_path / "gnss.csv", 60.0, 3 * 3600.0)
+    out = tmp_path / "sol.csv"
+    code, o, err = run(["navigate", "--imu", imu, "--gnss", gnss, "--out", out], capsys)
+    assert "Traceback" not in err and code in (0, 2)
+    lines = err.strip().splitlines()
+    assert any("a 3 h IMU gap at t = 59.990 s" in ln for ln in lines)
+    if code == 2:
+        assert len([ln for ln in lines if ln.startswith("selfnav: error:")]) == 1
+        assert not out.exists()

@@ -56,11 +56,15 @@ def test_ekf_road_aid_returns_a_cross_track_constraint(helsinki):
                   np.full(n, 3.0), None, None, "t")
     C = att.dcm_nb_from_euler(0.0, 0.0, g.seg_heading[s])
     ins = SimpleNamespace(lat=float(lat), lon=float(lon), h=0.0, velocity_n=np.zeros(3), C_nb=C)
-    flt = SimpleNamespace(ins=ins, P=np.eye(15) * 25.0, update_road=lambda *a, **k: None)
+    grade = []
+    flt = SimpleNamespace(ins=ins, P=np.eye(15) * 25.0, nx=15,
+                          kalman=lambda r, H, R: grade.append((r, H, R)))
     aid = EkfRoadAid(g, gd)
     outs = [aid(t, flt) for t in np.arange(0.2, n, 0.2)]
     got = [o for o in outs if o is not None]
     assert got, "no constraint in 30 s of fixes at a standstill beside a road"
+    # the level-road prior reaches the filter's public kalman: H picks the up velocity
+    assert grade and grade[-1][1].shape == (1, 15) and grade[-1][1][0, 5] == 1.0
     out = got[-1]
     assert abs(np.linalg.norm(out["normal_n"]) - 1.0) < 1e-12
     assert abs(out["offset"]) < 10.0 and out["sigma"] > 0

@@ -9,7 +9,8 @@ import pytest
 
 from selfnav.cli import main
 from selfnav.io.csvio import read_table, write_csv
-from selfnav.roads.hmm import HmmMatcher, _viterbi, node_distances
+from selfnav.roads.hmm import HmmMatcher, transition_route_distance
+from selfnav.roads.routes import node_distances
 from selfnav.roads.graph import packaged_map, project_to_polyline
 from selfnav.simulate.car import car_route
 
@@ -81,29 +82,38 @@ def test_route_distances_agree_with_networkx(maps):
     assert np.all(np.isinf(d_lim[np.asarray(ref) > 300.0]))
 
 
-def test_viterbi_kernel_agrees_with_brute_force():
-    rng = np.random.default_rng(5)
-    sizes = [3, 2, 4, 3, 2]
-    off = np.concatenate([[0], np.cumsum(sizes)])
-    em = rng.normal(0, 2, off[-1])
-    pairs_i, pairs_j, pair_off, logtr = [], [], [0], []
+@pytest.mark.parametrize("seed", [21, 22, 23])
+def test_viterbi_kernel_agrees_with_brute_force(maps, seed):
+    """The numba kernel (transitions on the fly, windows of 2 fixes, cached route rows) finds
+    the path an exhaustive search finds over the model written out in numpy (candidates, route
+    distances by :func:`transition_route_distance`, the per-epoch cut)."""
+    g = maps["kotka_karhula"]
+    traj, route, noisy = floating_car(g, seed, sigma=15.0, duration=300.0, period=5.0)
+    t, xy = traj.t[20:26], noisy[20:26]
+    m = HmmMatcher(g, sigma=15.0, k=3, window=2)
+    res = m.match(t, xy)
+    assert res.restart.tolist() == [True] + [False] * 5
+    cand = g.candidates(xy, m.radius, k=3, min_candidates=1, per_way=True)
+    off = cand.offsets(len(t))
+    em = -0.5 * (cand.dist / m.sigma) ** 2
     table = {}
-    for t in range(len(sizes) - 1):
-        for i in range(off[t], off[t + 1]):
-            for j in range(off[t + 1], off[t + 2]):
-                v = -abs(rng.normal(0, 3))
-                pairs_i.append(i), pairs_j.append(j), logtr.append(v)
-                table[i, j] = v
-        pair_off.append(len(pairs_i))
-    args = [np.asarray(a) for a in (em, off, pair_off, pairs_i, pairs_j, logtr)]
-    path, restart = _viterbi(*args, np.empty(off[-1]), np.empty(off[-1], np.int64))
+    for e in range(len(t) - 1):
+        i, j = (a.ravel() for a in np.meshgrid(np.arange(off[e], off[e + 1]),
+                                               np.arange(off[e + 1], off[e + 2]), indexing="ij"))
+        d_gc = np.hypot(*(xy[e + 1] - xy[e]))
+        fastest = m.max_speed * (t[e + 1] - t[e]) + 2 * m.radius
+        lim = min(d_gc + 2 * m.radius + 20 * m.beta, fastest)
+        d = transition_route_distance(g, cand, i, j, backtrack=m.backtrack, limit=lim)
+        lt = np.where(np.isfinite(d) & (d <= fastest), -np.abs(d - d_gc) / m.beta, -np.inf)
+        table.update({(a, b): v for a, b, v in zip(i, j, lt)})
     best, best_path = -np.inf, None
-    for combo in itertools.product(*[range(off[t], off[t + 1]) for t in range(len(sizes))]):
+    for combo in itertools.product(*[range(off[e], off[e + 1]) for e in range(len(t))]):
         v = sum(em[k] for k in combo) + sum(table[a, b] for a, b in zip(combo[:-1], combo[1:]))
         if v > best:
             best, best_path = v, combo
-    assert tuple(path) == best_path
-    assert restart.tolist() == [True, False, False, False, False]
+    assert np.isfinite(best)
+    np.testing.assert_array_equal(res.seg, cand.seg[list(best_path)])
+    np.testing.assert_allclose(res.along, cand.along[list(best_path)], atol=1e-9)
 
 
 def test_chain_restarts_where_no_transition_is_possible(maps):
@@ -211,3 +221,51 @@ def test_cli_match_reads_and_writes_other_datums(maps, tmp_path, capsys):
     assert np.max(np.hypot(x1 - x2, y1 - y2)) < 0.05
     x3, y3 = g.to_local(np.radians(b["lat_deg"]), np.radians(b["lon_deg"]))
     assert np.median(np.hypot(x1 - x3, y1 - y3)) > 20.0
+
+
+def _brute_candidates(g, xy, radius, k, per_way):
+    """Every segment measured against every point (numpy), nearest per (way, direction), k
+    nearest by (distance, segment): the oracle of the grid search."""
+    from selfnav.roads.graph import project_points_to_segments
+
+    out = []
+    a, b = g.xy[g.seg_u], g.xy[g.seg_v]
+    for q, p in enumerate(xy):
+        _, _, d, _ = project_points_to_segments(np.broadcast_to(p, a.shape), a, b)
+        idx = np.flatnonzero(d <= radius)
+        idx = idx[np.lexsort((idx, d[idx]))]
+        if per_way:
+            key = g.seg_way[idx] * 2 + (g.seg_u[idx] < g.seg_v[idx])
+            _, first = np.unique(key, return_index=True)
+            idx = idx[np.sort(first)]
+        out += [(q, int(i), d[i]) for i in idx[:k]]
+    return out
+
+
+@pytest.mark.parametrize("per_way,radius,k", [(True, 40.0, 16), (False, 25.0, 4),
+                                              (True, 150.0, 50)])
+def test_grid_candidate_search_agrees_with_brute_force(maps, per_way, radius, k):
+    g = maps["helsinki_centre"]
+    rng = np.random.default_rng(4)
+    x0, y0, x1, y1 = g.bounds()
+    xy = np.column_stack([rng.uniform(x0 - 100, x1 + 100, 150),
+                          rng.uniform(y0 - 100, y1 + 100, 150)])
+    c = g.candidates(xy, radius, k=k, min_candidates=0, per_way=per_way)
+    ref = _brute_candidates(g, xy, radius, k, per_way)
+    assert [(q, s) for q, s, _ in ref] == list(zip(c.query.tolist(), c.seg.tolist()))
+    np.testing.assert_allclose(c.dist, [d for *_, d in ref], rtol=0, atol=1e-9)
+
+
+def test_a_small_route_store_gives_the_same_match(maps):
+    """The route store is emptied when full (bounded memory); results do not depend on it."""
+    from selfnav.roads.routes import RouteCache
+
+    g = maps["helsinki_centre"]
+    traj, _, noisy = floating_car(g, 31, sigma=10.0, duration=1800.0, period=5.0)
+    ref = HmmMatcher(g, sigma=10.0).match(traj.t, noisy)
+    small = RouteCache(g, max_entries=3000)
+    res = HmmMatcher(g, sigma=10.0, window=64, cache=small).match(traj.t, noisy)
+    assert small.clears > 3
+    np.testing.assert_array_equal(res.seg, ref.seg)
+    np.testing.assert_array_equal(res.restart, ref.restart)
+    np.testing.assert_allclose(res.xy, ref.xy, atol=1e-9)

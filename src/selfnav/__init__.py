@@ -21,8 +21,9 @@ The Python API (each also a ``selfnav`` command):
 >>> selfnav.evaluate("truth.csv", sol)["horizontal_rms_m"] # doctest: +SKIP
 
 ``read_imu, read_gnss, read_roads, read_solution, read_attitude`` read files;
-``estimate_latitude`` (seed 000), ``MovingBaseNavigator`` (seeds 002/003), ``navigate``
-(EKF or seed 004, with or without roads), ``match`` (GNSS-only map matching) and
+``estimate_latitude`` (seed 000), ``navigate_moving`` and ``MovingBaseNavigator`` (seeds
+002/003), ``navigate`` (EKF or seed 004, with or without roads), ``match`` (GNSS-only map
+matching; ``read_fleet``, ``match_fleet`` and ``match_files`` for fleets of tracks) and
 ``evaluate`` run the methods; ``simulate`` makes data with known truth.
 """
 
@@ -34,8 +35,14 @@ _API = {
     "read_imu": "selfnav.api", "read_imu_positions": "selfnav.api", "read_gnss": "selfnav.api",
     "read_roads": "selfnav.api", "read_solution": "selfnav.api", "read_attitude": "selfnav.api",
     "estimate_latitude": "selfnav.api", "navigate": "selfnav.api", "match": "selfnav.api",
+    "match_fleet": "selfnav.api", "match_files": "selfnav.api", "read_fleet": "selfnav.api",
     "evaluate": "selfnav.api", "filter_config": "selfnav.api", "Solution": "selfnav.api",
+    "allan_noise": "selfnav.api", "latitude_requirements": "selfnav.api",
+    "latitude_error_budget": "selfnav.api", "evaluate_report": "selfnav.api",
+    "map_coverage": "selfnav.api", "check_map_covers": "selfnav.api", "imu_gaps": "selfnav.api",
+    "simulate_files": "selfnav.api", "run_montecarlo": "selfnav.api",
     "simulate": "selfnav.simulate.scenarios", "MovingBaseNavigator": "selfnav.moving",
+    "navigate_moving": "selfnav.moving_driver",
     "ImuData": "selfnav.types", "GnssData": "selfnav.types", "Trajectory": "selfnav.types",
     "AttitudeData": "selfnav.types",
 }

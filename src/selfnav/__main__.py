@@ -1,3 +1,3 @@
 from selfnav.cli import main
 
-main()
+raise SystemExit(main())

@@ -20,7 +20,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from selfnav.errors import InputError
+from selfnav.io.imu import check_rest_units, longest_stretch
+from selfnav.io.output import write_figure
 from selfnav.sensors import FLICKER_FLOOR
+
+#: Fewest samples an Allan analysis is run on.
+MIN_SAMPLES = 100
+
+RAD_S_TO_DEG_H = np.degrees(1.0) * 3600.0
+SQRT_S_TO_SQRT_H = 60.0  # (x)/√s -> (x)/√h
 
 
 def cluster_sizes(n: int, points_per_decade: int = 10) -> np.ndarray:
@@ -167,17 +176,28 @@ def identify(tau, adev, tolerance: float = 0.05, duration: float | None = None) 
 def analyze_imu(imu, m=None) -> dict:
     """Allan deviations and noise terms of all six axes of an :class:`~selfnav.io.ImuData`.
 
+    The Allan variance needs evenly spaced samples: gaps of a few samples are bridged, and a
+    record with longer gaps is analysed on its longest gap-free stretch (one warning says so).
+    Rates that fit deg/s better than rad/s get a warning too
+    (:func:`selfnav.io.imu.check_rest_units`).
+
     Returns
     -------
     dict with ``tau`` (M,), ``gyro_adev`` (M, 3) rad/s, ``accel_adev`` (M, 3) m/s²,
-    ``gyro`` and ``accel``: lists of three :class:`NoiseTerms`, ``dt`` and ``samples``.
+    ``gyro`` and ``accel``: lists of three :class:`NoiseTerms`, ``dt``, ``samples`` and
+    ``t_start``, ``t_end`` (the stretch analysed, s).
     """
+    imu = longest_stretch(imu, "the Allan analysis")
+    if len(imu) < MIN_SAMPLES:
+        raise InputError(imu.source or "IMU data", f"has {len(imu)} samples: too short for an "
+                         f"Allan analysis (at least {MIN_SAMPLES})")
+    check_rest_units(imu)
     dt = imu.dt
     tau, ag, cnt = allan_deviation(imu.omega_ib_b, dt, m)
     _, aa, _ = allan_deviation(imu.f_ib_b, dt, m)
     return {
         "tau": tau, "clusters": cnt, "gyro_adev": ag, "accel_adev": aa, "dt": dt,
-        "samples": len(imu),
+        "samples": len(imu), "t_start": float(imu.t[0]), "t_end": float(imu.t[-1]),
         "gyro": [identify(tau, ag[:, k], duration=imu.duration) for k in range(3)],
         "accel": [identify(tau, aa[:, k], duration=imu.duration) for k in range(3)],
     }
@@ -211,6 +231,29 @@ def plot_allan(result: dict, path, title: str = "Allan deviation"):
         ax.grid(True, which="both", alpha=0.3)
         ax.legend()
     fig.suptitle(title)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    try:
+        write_figure(fig, path, dpi=110)
+    finally:
+        plt.close(fig)
     return path
+
+
+def summary(res: dict) -> dict:
+    """The ``selfnav allan --json`` keys (DESIGN §6: lists of three, x y z) and the details, in
+    the units their names say."""
+    g, a = res["gyro"], res["accel"]
+    return {
+        "arw_deg_per_sqrt_h": [np.degrees(x.white) * SQRT_S_TO_SQRT_H for x in g],
+        "bias_instability_deg_per_h": [x.bias_instability * RAD_S_TO_DEG_H for x in g],
+        "vrw_m_per_s_per_sqrt_h": [x.white * SQRT_S_TO_SQRT_H for x in a],
+        "accel_bias_instability_m_per_s2": [x.bias_instability for x in a],
+        "gyro_rate_random_walk_deg_per_h_per_sqrt_h": [
+            x.random_walk * RAD_S_TO_DEG_H * SQRT_S_TO_SQRT_H for x in g],
+        "accel_random_walk_m_per_s2_per_sqrt_h": [x.random_walk * SQRT_S_TO_SQRT_H for x in a],
+        "gyro_bias_instability_tau_s": [x.bias_instability_tau for x in g],
+        "accel_bias_instability_tau_s": [x.bias_instability_tau for x in a],
+        "gyro_bias_instability_is_upper_bound": [x.bias_instability_bound for x in g],
+        "accel_bias_instability_is_upper_bound": [x.bias_instability_bound for x in a],
+        "samples": res["samples"], "dt_s": res["dt"],
+        "t_start_s": res.get("t_start"), "t_end_s": res.get("t_end"),
+    }

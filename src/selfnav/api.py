@@ -18,13 +18,16 @@ from selfnav.evaluate import load_road_polylines
 from selfnav.ins import calibrate
 from selfnav.ins.align import robust_init
 from selfnav.io.attitude_file import read_attitude
+from selfnav.io.imu import imu_segments, report_gaps
 from selfnav.io.readers import read_gnss, read_imu, read_imu_positions
 from selfnav.latitude import LatitudeResult
 from selfnav.latitude import estimate_latitude as _estimate_latitude
 from selfnav.latitude import estimate_latitude_multiposition
 from selfnav.roads.aid import EkfRoadAid, start_on_roads
 from selfnav.roads.graph import RoadGraph, read_roads
-from selfnav.roads.hmm import HmmMatcher
+from selfnav.io.fleet import Fleet, read_fleet
+from selfnav.roads.fleet import (FleetRun, MatchParams, match_files, match_track,
+                                 match_tracks)
 from selfnav.seed004 import SeedConfig, run_seed
 from selfnav.solution import Solution, read_solution
 from selfnav.types import GnssData, ImuData, OdometerData, Trajectory
@@ -32,6 +35,8 @@ from selfnav.types import GnssData, ImuData, OdometerData, Trajectory
 METHODS = ("ekf", "seed")
 #: a run that leaves more of its fixes unused than this warns (one line)
 REJECTION_WARNING = 0.2
+#: an IMU stretch between gaps shorter than this is not navigated, s
+MIN_SEGMENT_S = 10.0
 
 
 def estimate_latitude(imu: ImuData, *, method: str = "optimal", **kw) -> LatitudeResult:
@@ -165,6 +170,7 @@ def navigate(imu: ImuData, gnss: GnssData | None, roads=None, *, method: str = "
     """
     if method not in METHODS:
         raise SelfnavError(f"unknown method '{method}' (use {' or '.join(METHODS)})")
+    imu = report_gaps(imu)          # short gaps bridged, each long one said in one line
     if gnss is None:
         if init is None:
             raise SelfnavError("without GNSS the navigator needs an initial state (--init FILE)")
@@ -210,20 +216,49 @@ def navigate(imu: ImuData, gnss: GnssData | None, roads=None, *, method: str = "
     if notes and str(grade).lower() != "auto" and config is None:
         warnings.warn(f"the IMU is noisier than the '{grade}' preset says ({'; '.join(notes)}): "
                       "using the measured noise", SelfnavWarning, stacklevel=2)
-    aid = None
-    if graph is not None:
-        aid = EkfRoadAid(graph, gnss)
-    if init is not None:
-        start = initial_state(init, imu, cfg)
-    else:
-        # start only after a run of fixes that look healthy without an INS (an outlier window
-        # at start-up must not seed the navigator hundreds of metres off); with a map, fixes
-        # that also lie on its roads (a smooth drift from power-on looks healthy)
-        start = (start_on_roads(imu, gnss, graph, cfg) if graph is not None
-                 else robust_init(imu, gnss, cfg=cfg))
-    res = ins.run_filter(imu, gnss, cfg, init=start, smooth=smooth, progress=progress,
-                         road_aid=aid,
-                         odometer=None if odometer is None else odometer.shifted(applied))
+    # an IMU gap longer than a few samples ends a segment: each is navigated on its own and
+    # re-initialised from GNSS after the gap; no row stands inside a gap
+    odo_all = None if odometer is None else odometer.shifted(applied)
+    results, skipped = [], []
+    segments = imu_segments(imu)
+    for n_seg, sl in enumerate(segments):
+        part = imu.select(sl)
+        span = (part.t[0], part.t[-1])
+        g_part = gnss.select((gnss.t >= span[0]) & (gnss.t <= span[1]))
+        if part.duration < MIN_SEGMENT_S or (init is None or n_seg) and len(g_part) < 10:
+            skipped.append(f"IMU samples {span[0]:.3f}…{span[1]:.3f} s are too short or have "
+                           "too few fixes to navigate")
+            continue
+        aid = EkfRoadAid(graph, g_part) if graph is not None else None
+        try:
+            if init is not None and n_seg == 0:
+                start = initial_state(init, part, cfg)
+            elif graph is not None:
+                # start only after a run of fixes that look healthy without an INS and also
+                # lie on the map's roads (a smooth drift from power-on looks healthy)
+                start = start_on_roads(part, g_part, graph, cfg)
+            else:
+                # start only after a run of fixes that look healthy without an INS (an outlier
+                # window at start-up must not seed the navigator hundreds of metres off)
+                start = robust_init(part, g_part, cfg=cfg)
+        except SelfnavError as e:
+            skipped.append(f"IMU samples {span[0]:.3f}…{span[1]:.3f} s: {e}")
+            continue
+        prog = None if progress is None else (
+            lambda x, a=n_seg, n=len(segments): progress((a + x) / n))
+        odo = None if odo_all is None else odo_all.select(
+            (odo_all.t >= span[0]) & (odo_all.t <= span[1]))
+        results.append(ins.run_filter(part, g_part, cfg, init=start, smooth=smooth,
+                                      progress=prog, road_aid=aid, odometer=odo))
+    if not results:
+        if len(segments) == 1:
+            raise SelfnavError(skipped[0].split(": ", 1)[-1])
+        raise SelfnavError("no stretch of the IMU record between its gaps could be navigated "
+                           f"({skipped[0]})")
+    for why in skipped:
+        warnings.warn(f"{why}: no solution there", SelfnavWarning, stacklevel=2)
+    res = ins.concatenate_results(results)
+    stats["imu_segments"] = len(results)
     # without a given lever arm, the antenna is the point the data defines (the lever arm is
     # an estimate); rows at true time (the residual time-offset state)
     point = "antenna" if cfg.states.lever_arm else "imu"
@@ -276,26 +311,80 @@ def write_fix_log(path, solution: Solution):
                           "anchored": "%d"})
 
 
-def match(gnss: GnssData, roads, *, sigma_m: float = 10.0, radius_m: float | None = None,
-          beta_m: float | None = None) -> Solution:
+def match(gnss: GnssData, roads, *, sigma_m: float | None = None,
+          radius_m: float | None = None, beta_m: float | None = None) -> Solution:
     """GNSS-only map matching (hidden Markov model, Viterbi) onto OpenStreetMap roads.
 
-    Returns a :class:`Solution` whose rows are the fixes moved onto the roads, with the
-    ``cross_m`` column (distance moved) and the matcher's summary in ``stats``.
+    ``sigma_m``: the GNSS σ where the fixes carry none; None estimates it from the fixes
+    (Newson & Krumm's median distance to the nearest road). Returns a :class:`Solution` whose
+    rows are the fixes moved onto the roads, with the columns ``cross_m`` (distance moved),
+    ``way_id`` (OpenStreetMap way) and ``matched`` (a road within the search radius), and the
+    matcher's summary in ``stats``.
     """
-    if not sigma_m > 0:
+    if sigma_m is not None and not sigma_m > 0:
         raise SelfnavError(f"sigma_m must be positive, got {sigma_m}")
     graph = _as_roads(roads)
-    x, y = graph.to_local(gnss.lat, gnss.lon)
-    m = HmmMatcher(graph, sigma=sigma_m, radius=radius_m, beta=beta_m)
-    res = m.match(gnss.t, np.column_stack([x, y]), gnss.sigma_m)
+    m = MatchParams(sigma_m, radius_m, beta_m).matcher(graph)
+    tm = match_track(m, gnss.source or "track", gnss, auto_sigma=sigma_m is None)
+    if tm.error:
+        raise SelfnavError(tm.error)
+    return _match_solution(gnss, tm.result, m.with_sigma(tm.result.sigma))
+
+
+def _match_solution(gnss: GnssData, res, m) -> Solution:
     n = len(gnss.t)
     nan3 = np.full((n, 3), np.nan)
     tr = Trajectory(gnss.t, res.lat, res.lon, gnss.h, nan3, np.full((n, 3, 3), np.nan),
                     source="selfnav match (HMM)")
-    stats = {**res.summary(), "map_nodes": graph.n_nodes, "map_segments": graph.n_segments,
+    stats = {**res.summary(), "map_nodes": m.graph.n_nodes, "map_segments": m.graph.n_segments,
              "sigma_m": m.sigma, "beta_m": m.beta, "radius_m": m.radius}
-    return Solution(tr, None, {"cross_m": res.moved}, stats, "hmm", res)
+    return Solution(tr, None, {"cross_m": res.moved, "way_id": res.way,
+                               "matched": res.in_radius}, stats, "hmm", res)
+
+
+def match_fleet(tracks, roads, *, sigma_m: float | None = None, radius_m: float | None = None,
+                beta_m: float | None = None, workers: int | None = None,
+                scheduler: str | None = None, route: bool = False, progress=None,
+                run: FleetRun | None = None):
+    """Map-match many tracks, each on its own; results in track order, as they come.
+
+    Parameters
+    ----------
+    tracks : Fleet, list of (track_id, GnssData), or path(s)
+        A :class:`selfnav.io.fleet.Fleet` (:func:`read_fleet`), pairs, or fleet files/folders
+        (CSV or Parquet with an optional ``track_id`` column).
+    roads : path or RoadGraph
+        The map; a path lets Dask workers read it themselves.
+    sigma_m, radius_m, beta_m :
+        As :func:`match`.
+    workers : int, optional
+        Local Dask workers; 0 = this process. Default: this process for a small fleet (under
+        200,000 fixes), else one worker per core.
+    scheduler : str, optional
+        An existing Dask scheduler (``tcp://host:8786``).
+    route : bool
+        Also compute each track's driven route (``TrackMatch.route``).
+    progress : callable(n), optional
+        Called with the number of tracks just finished.
+
+    Yields
+    ------
+    selfnav.roads.fleet.TrackMatch
+        ``track_id``, ``result`` (a :class:`~selfnav.roads.hmm.MatchResult`, or None with
+        ``error`` set), ``route``.
+    """
+    if sigma_m is not None and not sigma_m > 0:
+        raise SelfnavError(f"sigma_m must be positive, got {sigma_m}")
+    if isinstance(tracks, Fleet):
+        items = [(tr.track_id, tr.gnss) for tr in tracks.tracks]
+    elif isinstance(tracks, (list, tuple)) and tracks and isinstance(tracks[0], tuple):
+        items = list(tracks)
+    else:
+        items = [(tr.track_id, tr.gnss) for tr in read_fleet(tracks).tracks]
+    if not isinstance(roads, RoadGraph):
+        roads = str(roads)
+    return match_tracks(items, roads, MatchParams(sigma_m, radius_m, beta_m), workers=workers,
+                        scheduler=scheduler, route=route, progress=progress, run=run)
 
 
 def evaluate(truth, solution, *, roads=None) -> dict:
@@ -306,19 +395,137 @@ def evaluate(truth, solution, *, roads=None) -> dict:
     ``truth`` and ``solution`` may be :class:`Trajectory`, :class:`Solution` or paths;
     ``roads`` a map path or road polylines for road-relative along/cross-track.
     """
-    def traj(x):
-        if isinstance(x, Solution):
-            return x.trajectory
-        if isinstance(x, Trajectory):
-            return x
-        return read_solution(x).trajectory
-
     if roads is not None and not isinstance(roads, list):
         roads = load_road_polylines(roads)
-    ev = _evaluate_trajectories(traj(truth), traj(solution), roads=roads)
+    ev = _evaluate_trajectories(as_trajectory(truth), as_trajectory(solution), roads=roads)
     return {**ev.metrics, "warnings": list(ev.warnings)}
 
 
+# --------------------------------------------------------------------------------------------
+# The other commands' functions (issue 11: every command calls the API)
+# --------------------------------------------------------------------------------------------
+def allan_noise(imu: ImuData, *, plot=None, title: str | None = None) -> dict:
+    """Allan deviation and noise terms of an IMU record at rest: the keys of
+    ``selfnav allan --json`` (ARW, bias instability, VRW, ... per axis, DESIGN §6).
+
+    Records with gaps are analysed on their longest gap-free stretch (one warning says so).
+    ``plot``: a PNG file for the log-log plot (written only when given).
+    """
+    from selfnav import allan as allan_mod
+
+    res = allan_mod.analyze_imu(imu)
+    out = allan_mod.summary(res)
+    if plot is not None:
+        allan_mod.plot_allan(res, plot, title or f"Allan deviation: {imu.source or 'IMU'}")
+        out["plot"] = str(plot)
+    return out
+
+
+def latitude_requirements(lat_deg: float = 60.0, *, seed_constants: bool = False) -> list:
+    """Seed 000's sensor-requirements table at ``lat_deg``: one dict per row (Δφ in degrees
+    and arc-minutes, gyro drift °/h and accelerometer error g that each cause it)."""
+    from selfnav.latitude import SEED_TABLE_DPHI_DEG, requirements_table
+
+    if not -90.0 <= lat_deg <= 90.0:
+        raise SelfnavError(f"latitude {lat_deg:g}° is outside -90..90")
+    tab = requirements_table(SEED_TABLE_DPHI_DEG, lat_deg, seed_constants=seed_constants)
+    return [{k: float(v) for k, v in zip(tab, vals)} for vals in zip(*tab.values())]
+
+
+def latitude_error_budget(result: LatitudeResult, *, gyro_bias_deg_h: float = 0.005,
+                          accel_bias_ug: float = 50.0) -> dict:
+    """Latitude error, degrees, caused by each gyro (``gyro_bias_deg_h``) and accelerometer
+    (``accel_bias_ug``) bias alone, the noise, and their root sum square (seed 000 (4.3))."""
+    from selfnav.latitude import DEG_PER_H, G_STD, error_budget
+
+    b = error_budget(result, gyro_bias_deg_h * DEG_PER_H, accel_bias_ug * 1e-6 * G_STD)
+    return {k: float(np.degrees(v)) for k, v in b.items()}
+
+
+def evaluate_report(truth, solution, *, roads=None, report=None, title: str | None = None,
+                    truth_name: str | None = None, solution_name: str | None = None) -> dict:
+    """:func:`evaluate` and, with ``report`` (a folder), its plots, ``metrics.json`` and
+    ``report.html`` (written as one set). Returns the ``selfnav evaluate --json`` object:
+    the metrics (with ``coverage``), ``warnings`` and, with a report, ``report`` and
+    ``figures``."""
+    from selfnav.report import write_report
+
+    tn = truth_name or (str(truth) if not isinstance(truth, (Solution, Trajectory)) else "truth")
+    sn = solution_name or (str(solution) if not isinstance(solution, (Solution, Trajectory))
+                           else "solution")
+    if roads is not None and not isinstance(roads, list):
+        roads = load_road_polylines(roads)
+    ev = _evaluate_trajectories(as_trajectory(truth), as_trajectory(solution), roads=roads,
+                                truth_name=tn, solution_name=sn)
+    out = {"truth": tn, "solution": sn, **ev.metrics, "warnings": list(ev.warnings)}
+    if report is not None:
+        files = write_report(ev, report, roads=roads, sources={"truth": tn, "solution": sn},
+                             title=title or f"selfnav evaluate: {sn} against {tn}")
+        out["report"] = files["report.html"]
+        out["figures"] = [files["errors.png"], files["track.png"]]
+    return out
+
+
+def map_coverage(roads, lat, lon, *, margin_m: float = 1000.0) -> float:
+    """Share of the points (rad) within ``margin_m`` of the map's extent
+    (:func:`selfnav.roads.graph.map_coverage`)."""
+    from selfnav.roads.graph import map_coverage as _coverage
+
+    return _coverage(_as_roads(roads), lat, lon, margin_m=margin_m)
+
+
+def check_map_covers(roads, lat, lon, *, what: str = "the data", margin_m: float = 1000.0):
+    """Refuse (one line) a map none of the points lies on, and warn when part of them lie off
+    it: the check ``selfnav match`` and ``selfnav navigate --map`` make before the work."""
+    from selfnav.roads.graph import check_map_covers as _check
+
+    graph = _as_roads(roads)
+    _check(graph, lat, lon, what=what, margin_m=margin_m)
+    return graph
+
+
+def imu_gaps(imu: ImuData, min_missing: int = 1) -> list:
+    """Gaps of an IMU record (:func:`selfnav.io.imu.imu_gaps`)."""
+    from selfnav.io.imu import imu_gaps as _gaps
+
+    return _gaps(imu, min_missing)
+
+
+def simulate_files(spec, out_dir, *, seed: int = 0, grade: str | None = None,
+                   duration: float | None = None, dt: float | None = None, progress=None):
+    """Simulate a scenario (:func:`selfnav.simulate.scenarios.simulate`) and write its files
+    into the folder ``out_dir`` as one set; returns ``(simulation, paths)``."""
+    from selfnav.simulate.scenarios import simulate, write_simulation
+
+    sim = simulate(spec, seed=seed, grade=grade, duration=duration, dt=dt, progress=progress)
+    if progress is not None:
+        progress("writing")
+    return sim, write_simulation(sim, out_dir)
+
+
+def run_montecarlo(scenario: str, runs: int, *, out=None, **kw):
+    """A seeded Monte Carlo campaign (:func:`selfnav.montecarlo.run_montecarlo`, same keywords);
+    with ``out`` (``.csv`` or ``.parquet``) the per-run rows are written too."""
+    from selfnav import montecarlo as mc
+
+    res = mc.run_montecarlo(scenario, runs, **kw)
+    if out is not None:
+        mc.write_results(out, res)
+    return res
+
+
+def as_trajectory(x) -> Trajectory:
+    """A :class:`Trajectory` from a Trajectory, a :class:`Solution` or a solution/truth file."""
+    if isinstance(x, Solution):
+        return x.trajectory
+    if isinstance(x, Trajectory):
+        return x
+    return read_solution(x).trajectory
+
+
 __all__ = ["read_imu", "read_imu_positions", "read_gnss", "read_roads", "read_solution",
-           "read_attitude", "estimate_latitude", "navigate", "match", "evaluate",
-           "filter_config", "initial_state", "write_fix_log", "Solution"]
+           "read_attitude", "read_fleet", "estimate_latitude", "navigate", "match", "match_fleet",
+           "match_files", "evaluate", "filter_config", "initial_state", "write_fix_log",
+           "Solution", "allan_noise", "latitude_requirements", "latitude_error_budget",
+           "evaluate_report", "map_coverage", "check_map_covers", "imu_gaps", "simulate_files",
+           "run_montecarlo", "as_trajectory"]

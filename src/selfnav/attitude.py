@@ -93,6 +93,22 @@ def euler_from_dcm_bn(C_bn):
     return euler_from_dcm_nb(np.swapaxes(np.asarray(C_bn, dtype=float), -1, -2))
 
 
+def euler_rates_to_body(roll, pitch, roll_rate, pitch_rate, heading_rate):
+    """``ω_nb^b`` (body RFU, rad/s, shape (..., 3)) from Euler angles and their rates.
+
+    Seed 002 (6) with the seeds' yaw rate ``ψ̇ = −heading rate`` (the convention of
+    :func:`dcm_nb_from_euler`).
+    """
+    g, th = np.asarray(roll, float), np.asarray(pitch, float)
+    gd, thd = np.asarray(roll_rate, float), np.asarray(pitch_rate, float)
+    psid = -np.asarray(heading_rate, float)
+    return np.stack([
+        thd * np.cos(g) - psid * np.cos(th) * np.sin(g),   # seed 002, (6) row 1
+        psid * np.sin(th) + gd,                             # row 2
+        thd * np.sin(g) + psid * np.cos(th) * np.cos(g),    # row 3
+    ], axis=-1)
+
+
 def rotvec_to_dcm(rv):
     """Rotation vector -> active rotation matrix ``exp([rv])`` (Rodrigues), series-safe near 0."""
     rv = np.asarray(rv, dtype=float)

@@ -6,13 +6,15 @@ disturbance, Xi'an, site 34.246048° N; BSD 2-clause, © Gongmin Yan, PSINS tool
 from __future__ import annotations
 
 import json
+import warnings
 from importlib import resources
 from pathlib import Path
 
 import numpy as np
 
+from selfnav.errors import SelfnavWarning
 from selfnav.io.jsonio import jsonable
-from selfnav.io.csvio import atomic_write_bytes
+from selfnav.io.output import atomic_write_bytes, figure_png
 
 SITE_LAT_DEG = 34.246048
 
@@ -87,13 +89,27 @@ def navigation_demo(duration: float = 420.0, seeds=(1, 2, 3)) -> dict:
                     "(ODbL); RMS over the drives, the plot shows the first"}
 
 
+#: The files of the demo report (an older report's files are replaced as a set).
+DEMO_FILES = ("latitude.json", "latitude_windows.png", "navigation.png", "index.html")
+
+
 def run_demo(out_dir: Path) -> dict:
-    """Run the latitude method on the shipped static record; write JSON, a plot and HTML."""
+    """Run the latitude method on the shipped static record and the simulated drives; write
+    JSON, plots and ``index.html`` into ``out_dir`` as one set (an interrupt leaves the old
+    report or the new one)."""
+    from selfnav.io.output import atomic_folder, check_output_folder
+
+    check_output_folder(out_dir)
+    with warnings.catch_warnings():  # the demo reports its own notes
+        warnings.simplefilter("ignore", SelfnavWarning)
+        with atomic_folder(out_dir, owned=DEMO_FILES) as tmp:
+            return _write_demo(Path(tmp))
+
+
+def _write_demo(out_dir: Path) -> dict:
     import matplotlib
 
     matplotlib.use("Agg")
-    import io
-
     import matplotlib.pyplot as plt
 
     from selfnav.io.readers import read_imu
@@ -103,7 +119,6 @@ def run_demo(out_dir: Path) -> dict:
     res = {m: estimate_latitude(imu, rest=m).to_dict() for m in ("auto", "still")}
     res["seed"] = estimate_latitude(imu, method="seed").to_dict()
     win = window_estimates(imu)
-    out_dir.mkdir(parents=True, exist_ok=True)
     summary = {
         "data": "PSINS lasergyro.imu (real RLG IMU at rest, Xi'an), shipped with selfnav",
         "site_latitude_deg": SITE_LAT_DEG,
@@ -121,10 +136,8 @@ def run_demo(out_dir: Path) -> dict:
     ax.set_title("Latitude from a resting RLG IMU, 5-min windows (real data)")
     ax.legend()
     fig.tight_layout()
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=110)
+    atomic_write_bytes(out_dir / "latitude_windows.png", figure_png(fig, 110))
     plt.close(fig)
-    atomic_write_bytes(out_dir / "latitude_windows.png", buf.getvalue())
     nav = navigation_demo()
     fig, ax = plt.subplots(figsize=(7, 7))
     gr = nav["graph"]
@@ -143,10 +156,8 @@ def run_demo(out_dir: Path) -> dict:
     ax.set_title("Simulated drive through 3 min of unflagged 200 m outliers")
     ax.legend(fontsize=8)
     fig.tight_layout()
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=100)
+    atomic_write_bytes(out_dir / "navigation.png", figure_png(fig, 100))
     plt.close(fig)
-    atomic_write_bytes(out_dir / "navigation.png", buf.getvalue())
     summary["navigation_simulated"] = {
         "note": nav["note"],
         **{k: {m: r[m] for m in ("horizontal_rms_m", "horizontal_max_m")} for k, r in nav["runs"].items()}}

@@ -10,7 +10,7 @@ GOST 32453-2017 (PZ-90.11); Krasovsky 1940 ellipsoid (SK-42).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -45,27 +45,20 @@ class Ellipsoid:
     gm: float = 3.986004418e14
     omega: float = OMEGA_EARTH
 
-    @property
-    def f(self) -> float:
-        return 1.0 / self.inv_f
+    # derived constants, computed once (the filters read them at every epoch)
+    f: float = field(init=False, repr=False)
+    b: float = field(init=False, repr=False)
+    e2: float = field(init=False, repr=False)        # first eccentricity squared
+    k_somigliana: float = field(init=False, repr=False)
+    m: float = field(init=False, repr=False)         # ω² a² b / GM (TR8350.2)
 
-    @property
-    def b(self) -> float:
-        return self.a * (1.0 - self.f)
-
-    @property
-    def e2(self) -> float:
-        """First eccentricity squared."""
-        return self.f * (2.0 - self.f)
-
-    @property
-    def k_somigliana(self) -> float:
-        return (self.b * self.gamma_p) / (self.a * self.gamma_e) - 1.0
-
-    @property
-    def m(self) -> float:
-        """omega^2 a^2 b / GM (TR8350.2)."""
-        return self.omega**2 * self.a**2 * self.b / self.gm
+    def __post_init__(self):
+        f = 1.0 / self.inv_f
+        b = self.a * (1.0 - f)
+        for name, value in (("f", f), ("b", b), ("e2", f * (2.0 - f)),
+                            ("k_somigliana", (b * self.gamma_p) / (self.a * self.gamma_e) - 1.0),
+                            ("m", self.omega**2 * self.a**2 * b / self.gm)):
+            object.__setattr__(self, name, value)
 
 
 WGS84 = Ellipsoid("WGS-84", 6378137.0, 298.257223563, 9.7803253359, 9.8321849378)
@@ -127,6 +120,22 @@ def earth_rate_n(lat, omega: float = OMEGA_EARTH):
     lat = np.asarray(lat, dtype=float)
     z = np.zeros_like(lat)
     return np.stack([z, omega * np.cos(lat), omega * np.sin(lat)], axis=-1)
+
+
+def transport_rate_n(lat, velocity_n, h=0.0, ellipsoid: Ellipsoid = WGS84):
+    """``ω_en^n = (−v_N/R_φ, v_E/R_λ, v_E tan φ / R_λ)`` in ENU for a velocity over the
+    ellipsoid, rad/s (..., 3) (seed 004 (6))."""
+    lat = np.asarray(lat, dtype=float)
+    velocity_n = np.asarray(velocity_n, dtype=float)
+    r_phi, r_lam = radii(lat, h, ellipsoid)
+    ve, vn = velocity_n[..., 0], velocity_n[..., 1]
+    return np.stack([-vn / r_phi, ve / r_lam, ve * np.tan(lat) / r_lam], axis=-1)
+
+
+def nav_rate_n(lat, velocity_n, h=0.0, ellipsoid: Ellipsoid = WGS84):
+    """Absolute rate of the ENU navigation frame ``ω_in^n = ω_ie^n + ω_en^n``, rad/s (..., 3)
+    (seed 002 (1): ``(−φ̇, (Ω + λ̇) cos φ, (Ω + λ̇) sin φ)``)."""
+    return earth_rate_n(lat, ellipsoid.omega) + transport_rate_n(lat, velocity_n, h, ellipsoid)
 
 
 def geodetic_to_ecef(lat, lon, h=0.0, ellipsoid: Ellipsoid = WGS84):
@@ -211,9 +220,11 @@ def enu_offset(lat0, lon0, h0, lat, lon, h, ellipsoid: Ellipsoid = WGS84):
         w = math.sqrt(1.0 - ellipsoid.e2 * s2)
         rn = ellipsoid.a / w + h0
         rm = ellipsoid.a * (1.0 - ellipsoid.e2) / (w * w * w) + h0
-        return np.array([(lon - lon0) * rn * math.cos(lat0), (lat - lat0) * rm, h - h0])
+        dlon = (lon - lon0 + math.pi) % (2.0 * math.pi) - math.pi      # across ±180° too
+        return np.array([dlon * rn * math.cos(lat0), (lat - lat0) * rm, h - h0])
     rm, rn = radii(lat0, h0, ellipsoid)
-    return np.stack(np.broadcast_arrays((np.asarray(lon) - lon0) * rn * np.cos(lat0),
+    dlon = np.mod(np.asarray(lon) - lon0 + np.pi, 2.0 * np.pi) - np.pi
+    return np.stack(np.broadcast_arrays(dlon * rn * np.cos(lat0),
                                         (np.asarray(lat) - lat0) * rm,
                                         np.asarray(h) - h0), axis=-1)
 

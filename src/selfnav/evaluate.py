@@ -1,6 +1,8 @@
 """Evaluation of a navigation solution against truth (DESIGN §6 ``selfnav evaluate``).
 
-The truth is interpolated onto the solution's times (only the overlap counts); each solution
+The truth is interpolated onto the solution's times (only the overlap counts, and never across
+a hole in the truth longer than :data:`MAX_TRUTH_GAP` truth intervals: solution epochs inside
+such a hole are left out, and ``coverage`` says which share of the solution was compared); each solution
 point's error is the ECEF difference rotated into the local ENU frame at the truth point, in
 metres. Metrics:
 
@@ -25,11 +27,32 @@ import numpy as np
 
 from selfnav import attitude as att
 from selfnav.earth import WGS84, enu_rotation, geodetic_to_ecef, geodetic_to_enu
-from selfnav.errors import SelfnavError
+from selfnav.errors import SelfnavError, warn
 from selfnav.types import Trajectory
 
 #: Speed below which the direction of motion is not trusted as a heading, m/s.
 MIN_SPEED = 0.2
+
+#: The truth is not interpolated across a step longer than this many (median) truth intervals.
+MAX_TRUTH_GAP = 3.0
+
+
+def truth_gap_mask(truth_t, t, max_intervals: float = MAX_TRUTH_GAP):
+    """True for times ``t`` that fall strictly inside a hole of the truth (a step longer than
+    ``max_intervals`` median truth intervals), where interpolation would invent the truth.
+
+    Returns ``(mask, holes)`` with ``holes`` the ``(start, end)`` times of every such step.
+    """
+    truth_t = np.asarray(truth_t, dtype=float)
+    t = np.asarray(t, dtype=float)
+    d = np.diff(truth_t)
+    if d.size == 0:
+        return np.zeros(len(t), bool), []
+    big = d > max_intervals * np.median(d)
+    holes = [(float(truth_t[k]), float(truth_t[k + 1])) for k in np.flatnonzero(big)]
+    k = np.clip(np.searchsorted(truth_t, t, side="right") - 1, 0, len(d) - 1)
+    mask = big[k] & (t > truth_t[k]) & (t < truth_t[k + 1])
+    return mask, holes
 
 
 def _interp_angle(t_new, t, a):
@@ -217,6 +240,18 @@ def evaluate(truth: Trajectory, solution: Trajectory, *, roads=None,
     if n_out:
         warnings.append(f"{n_out} of {len(solution)} solution epochs lie outside the truth's "
                         "time span and are not evaluated")
+    in_hole, holes = truth_gap_mask(truth.t, solution.t)
+    n_hole = int((in_hole & inside).sum())
+    if n_hole:
+        longest = max(holes, key=lambda h: h[1] - h[0])
+        warnings.append(f"{n_hole} of {len(solution)} solution epochs fall in {len(holes)} "
+                        f"hole(s) of the truth (the longest {longest[1] - longest[0]:.4g} s at "
+                        f"t = {longest[0]:.3f} s) and are not evaluated: the truth is not "
+                        "interpolated across them")
+    inside &= ~in_hole
+    if not inside.any():
+        raise SelfnavError(f"{solution_name}: no epoch can be compared: all fall in holes of "
+                           f"{truth_name}")
     t = solution.t[inside]
     tl = np.interp(t, truth.t, truth.lat)
     tlon = _interp_angle(t, truth.t, truth.lon)
@@ -243,7 +278,11 @@ def evaluate(truth: Trajectory, solution: Trajectory, *, roads=None,
     m.update(motion_metrics(truth, solution, t, inside))
     m.update({"samples": int(len(t)), "duration_s": float(t[-1] - t[0]),
               "solution_samples": int(len(solution)), "t_start_s": float(t[0]),
-              "t_end_s": float(t[-1])})
+              "t_end_s": float(t[-1]), "coverage": float(len(t) / len(solution)),
+              "truth_holes": len(holes),
+              "truth_hole_max_s": float(max((b - a for a, b in holes), default=0.0))})
+    for w in warnings:
+        warn(w)
     return Evaluation(t, e, along, cross, tl, tlon, th, sl, slon, sh, hdg, ra, rc, m, warnings)
 
 

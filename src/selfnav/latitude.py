@@ -34,7 +34,8 @@ from numba import njit
 
 from selfnav import attitude as att
 from selfnav.earth import OMEGA_EARTH, normal_gravity
-from selfnav.errors import InputError, NotAtRestError, SelfnavError
+from selfnav.errors import InputError, NotAtRestError, SelfnavError, warn
+from selfnav.io.imu import check_rest_units, longest_stretch
 
 DEG = np.pi / 180.0
 DEG_PER_H = DEG / 3600.0
@@ -328,6 +329,17 @@ def _check_at_rest(imu, path):
     return w_mean, f_mean
 
 
+def _check_seed_solvable(imu, path) -> None:
+    """Seed (1.4) needs ``|ω·f| < Ω g``: refuse, in one line, a record whose gyro errors push the
+    ratio past 1 (the arcsine has no solution and the formula would print 90°)."""
+    w, f = imu.omega_ib_b.mean(axis=0), imu.f_ib_b.mean(axis=0)
+    s = float(w @ f / (SEED_OMEGA * SEED_G))
+    if abs(s) >= 1.0:
+        raise SelfnavError(f"{path}: the seed formula (1.4) has no solution on this record: "
+                           f"(ω·f)/(Ω g) = {s:.4f}, beyond ±1 (gyro bias or scale errors larger "
+                           "than the formula tolerates); use --method optimal")
+
+
 def _blocks(n: int, n_blocks: int):
     edges = np.linspace(0, n, n_blocks + 1).astype(int)
     lab = np.repeat(np.arange(n_blocks), np.diff(edges))
@@ -516,11 +528,15 @@ def estimate_latitude(imu, *, method: str = "optimal", rest: str = "auto", h: fl
         raise SelfnavError(f"unknown latitude method '{method}' (use optimal or seed)")
     if rest not in ("auto", "still", "disturbed"):
         raise SelfnavError(f"unknown rest mode '{rest}' (use auto, still or disturbed)")
+    imu = longest_stretch(imu, "the latitude estimate")
     n = len(imu)
     if n < 100:
         raise InputError(path, f"{n} samples: the latitude method needs at least 100 samples "
                          "at rest (a few seconds)")
     _check_at_rest(imu, path)
+    check_rest_units(imu, path)
+    if method == "seed":
+        _check_seed_solvable(imu, path)
     nb = int(min(n_blocks, n // 50))
     nb = max(nb, 2)
     lab = _blocks(n, nb)
@@ -569,8 +585,14 @@ def estimate_latitude(imu, *, method: str = "optimal", rest: str = "auto", h: fl
         sigma2 += (np.tan(lat) * ((wnorm / SEED_OMEGA) * (np.linalg.norm(f_full) / SEED_G) - 1.0)) ** 2
     if abs(lat) > 85.0 * DEG:
         warnings.append("near the pole the heading is poorly defined")
+    # a first-order σ beyond 90° says only that the record does not determine the latitude
+    sigma = float(min(np.sqrt(sigma2), np.pi / 2))
+    if sigma > 10.0 * DEG:
+        warnings.append(f"σ {np.degrees(sigma):.1f}°: this record hardly determines the latitude")
+    for w in warnings:
+        warn(f"{path}: {w}")
     return LatitudeResult(
-        latitude=lat, sigma=float(np.sqrt(sigma2)), sigma_noise=sigma_noise,
+        latitude=lat, sigma=sigma, sigma_noise=sigma_noise,
         heading=heading, pitch=pitch, roll=roll, sigma_heading=sig_heading,
         samples=n, duration=imu.duration, method=method,
         omega_mean_b=w_full, f_mean_b=f_full, earth_rate_ratio=ratio,
@@ -632,6 +654,7 @@ def estimate_latitude_multiposition(imu, *, gyro_bias_prior: float = 1.0 * DEG_P
     for p in ids:
         part = imu.select(imu.position == p)
         part.source = f"{path} (position {p})"
+        part = longest_stretch(part, f"position {p}")
         if len(part) < 100:
             raise InputError(path, f"position {p} has {len(part)} samples; at least 100 are needed",
                              column="position")
@@ -677,6 +700,8 @@ def estimate_latitude_multiposition(imu, *, gyro_bias_prior: float = 1.0 * DEG_P
     if scale > 4.0:
         warnings.append(f"the positions disagree with the model (χ²/dof = {scale:.1f}): "
                         "moving between positions, or scale errors; sigma widened")
+    for w in warnings:
+        warn(f"{path}: {w}")
     C1 = np.swapaxes(att.rotvec_to_dcm(dth[0]), -1, -2) @ C0[0]
     roll, pitch, heading = (float(v) for v in att.euler_from_dcm_nb(C1))
     n_all = len(imu)

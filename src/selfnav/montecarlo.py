@@ -27,14 +27,15 @@ Registering a pair is one call::
 """
 from __future__ import annotations
 
-import logging
-import os
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
 
 import numpy as np
 
+from selfnav.cluster import local_cluster, make_client  # noqa: F401 (local_cluster re-exported)
+from selfnav.cluster import results_as_completed
 from selfnav.errors import SelfnavError
 
 
@@ -184,9 +185,11 @@ register_pair("static-latitude", run_static_latitude, unit="deg",
 def run_chunk(run: Callable, indices, seeds, params: dict) -> list[dict]:
     """Run a batch of seeds (one Dask task). Each row gets ``run`` (index) and ``seed``."""
     rows = []
-    for i, s in zip(indices, seeds):
-        r = run(int(s), params)
-        rows.append({"run": int(i), "seed": int(s), **r})
+    with warnings.catch_warnings():  # a run's notes are not the user's: the summary speaks
+        warnings.simplefilter("ignore")
+        for i, s in zip(indices, seeds):
+            r = run(int(s), params)
+            rows.append({"run": int(i), "seed": int(s), **r})
     return rows
 
 
@@ -255,41 +258,6 @@ def _to_table(rows: list[dict]) -> dict:
     return {k: np.array([r[k] for r in rows]) for k in keys}
 
 
-def _make_client(workers: int, scheduler: str | None):
-    from dask.distributed import Client
-
-    if scheduler:
-        try:
-            return Client(scheduler, timeout="10s"), None
-        except (OSError, TimeoutError) as e:
-            raise SelfnavError(f"cannot reach the Dask scheduler at {scheduler}: {e}") from None
-    cluster = local_cluster(workers)
-    return Client(cluster), cluster
-
-
-def local_cluster(workers: int):
-    """A ``LocalCluster`` of ``workers`` processes with one thread each, tuned for many small runs.
-
-    Dask sets ``MALLOC_TRIM_THRESHOLD_=65536`` in its workers, which also switches off glibc's
-    dynamic mmap threshold: every NumPy array above 128 kB (a 60 s, 100 Hz IMU record is 144 kB)
-    is then mmapped and unmapped per use, and the workers spent ~45 % more CPU per run than this
-    process (measured). The variable is left unset here, so the workers allocate like any Python
-    process.
-    """
-    import dask
-    from dask.distributed import LocalCluster
-
-    key = "MALLOC_TRIM_THRESHOLD_"
-    saved = os.environ.pop(key, None)  # a nanny of an earlier cluster may have exported it
-    try:
-        with dask.config.set({f"distributed.nanny.pre-spawn-environ.{key}": None}):
-            return LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                                dashboard_address=None, silence_logs=logging.ERROR)
-    finally:
-        if saved is not None:
-            os.environ[key] = saved
-
-
 def run_montecarlo(name: str, runs: int, *, seed: int = 0, params: dict | None = None,
                    workers: int = 2, scheduler: str | None = None, chunk_size: int | None = None,
                    client=None, progress: Callable[[int], None] | None = None) -> MonteCarloResult:
@@ -337,13 +305,13 @@ def run_montecarlo(name: str, runs: int, *, seed: int = 0, params: dict | None =
                 progress(len(idx))
     else:
         try:
-            from dask.distributed import as_completed
+            import dask.distributed  # noqa: F401
         except ImportError:
             raise SelfnavError("Dask is not installed: pip install 'selfnav[dask]', or run in "
                                "this process with --workers 0") from None
 
         if client is None:
-            client, own_cluster = _make_client(workers, scheduler)
+            client, own_cluster = make_client(workers, scheduler)
             own_client = client
         try:
             nw = len(client.scheduler_info().get("workers", {})) or max(workers, 1)
@@ -352,8 +320,7 @@ def run_montecarlo(name: str, runs: int, *, seed: int = 0, params: dict | None =
             size = chunk_size or default_chunk_size(runs, nw)
             futs = [client.submit(run_chunk, pair.run, idx, seeds[idx], p, pure=False)
                     for idx in _chunks(runs, size)]
-            for fut in as_completed(futs):
-                part = fut.result()
+            for part in results_as_completed(futs):
                 rows += part
                 if progress:
                     progress(len(part))

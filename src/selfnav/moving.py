@@ -31,22 +31,13 @@ import numpy as np
 
 from selfnav import attitude as att
 from selfnav.earth import OMEGA_EARTH
+from selfnav.io.csvio import write_csv
+from selfnav.kernels import mat3_mul, nav_increments, rodrigues
+from selfnav.moving_budget import BUDGET_KEYS, error_budget, grade_errors
 
-DEG = np.pi / 180.0
-DEG_PER_H = DEG / 3600.0
-DEG_PER_RTH = DEG / 60.0  # °/√h in rad/√s
-
-#: Sensor grades: gyro bias (rad/s), angle random walk (rad/√s), attitude-source white noise per
-#: sample (rad) and attitude-error drift rate (rad/s). Typical values, stated for the table.
-GRADES = {
-    "navigation": dict(gyro_bias=0.005 * DEG_PER_H, arw=0.002 * DEG_PER_RTH,
-                       attitude_noise=0.001 * DEG, attitude_rate=0.002 * DEG_PER_H),
-    "tactical": dict(gyro_bias=1.0 * DEG_PER_H, arw=0.1 * DEG_PER_RTH,
-                     attitude_noise=0.01 * DEG, attitude_rate=0.5 * DEG_PER_H),
-    "mems": dict(gyro_bias=10.0 * DEG_PER_H, arw=0.3 * DEG_PER_RTH,
-                 attitude_noise=0.05 * DEG, attitude_rate=5.0 * DEG_PER_H),
-}
-
+#: The two conventions for IMU rate rows (``--imu-rates``): the package's one convention
+#: (:class:`selfnav.types.ImuData`, mean over the interval ending at ``t``) and point samples.
+RATE_CONVENTIONS = ("interval-mean", "instantaneous")
 
 def gain_from_bandwidth(bandwidth_hz: float) -> float:
     """Observer gain ``K = 2π B`` (1/s) for a first-order bandwidth ``B`` in Hz."""
@@ -81,6 +72,46 @@ def coning_increments(dtheta):
     return out
 
 
+def check_rates(rates: str) -> str:
+    """``rates`` if it is one of :data:`RATE_CONVENTIONS`, else ValueError."""
+    if rates not in RATE_CONVENTIONS:
+        raise ValueError(f"unknown rate convention '{rates}' ({' or '.join(RATE_CONVENTIONS)})")
+    return rates
+
+
+def gyro_rotations(t, omega_ib_b, rates="interval-mean"):
+    """Rotation vectors over ``[t_k, t_{k+1}]`` (N-1, 3) from gyro rate rows at ``t`` (N,).
+
+    ``rates="interval-mean"`` (the package's convention, :class:`selfnav.types.ImuData`): row
+    ``k+1`` is the mean rate over ``[t_k, t_{k+1}]``, so the increment is ``ω_{k+1} Δt_k``
+    exactly, coning-corrected by :func:`coning_increments`; row 0 (its interval starts before
+    ``t_0``) is not used. ``"instantaneous"``: point samples, integrated by
+    :func:`gyro_increments`.
+    """
+    t = np.asarray(t, float)
+    w = np.asarray(omega_ib_b, float)
+    if check_rates(rates) == "instantaneous":
+        return gyro_increments(t, w)
+    return coning_increments(w[1:] * np.diff(t)[:, None])
+
+
+def rates_at_knots(t, rotvec_b):
+    """Body rates at the knots ``t`` (N,) from rotation vectors over the N-1 intervals.
+
+    The rotation over an interval divided by its length is the interval's mean rate; the rate at
+    a knot is ``(−a_{k−2} + 7a_{k−1} + 7a_k − a_{k+1})/12`` from the four neighbouring means
+    (4th order on a uniform grid), the mean of the two neighbours next to the ends.
+    """
+    t = np.asarray(t, float)
+    a = np.asarray(rotvec_b, float) / np.diff(t)[:, None]
+    out = np.empty((len(t), 3))
+    out[0], out[-1] = a[0], a[-1]
+    out[1:-1] = 0.5 * (a[:-1] + a[1:])
+    if len(a) >= 4:
+        out[2:-2] = (-a[:-3] + 7.0 * a[1:-2] + 7.0 * a[2:-1] - a[3:]) / 12.0
+    return out
+
+
 # ----------------------------------------------------------------------------- ω_n, two ways
 def omega_n_discrete(t, C_nb, rotvec_b):
     """Form (b): mean ``ω_n`` over each interval from attitude matrices and gyro increments.
@@ -89,11 +120,9 @@ def omega_n_discrete(t, C_nb, rotvec_b):
     ``ζ_k = log(C_b^n(k) exp([Δθ_k]) C_n^b(k+1))``; returns ``(t_mid, ζ_k/Δt)``.
     """
     t = np.asarray(t, float)
-    C_nb = np.asarray(C_nb, float)
-    C_bn = np.swapaxes(C_nb, -1, -2)
-    E = C_bn[:-1] @ att.rotvec_to_dcm(rotvec_b) @ C_nb[1:]
-    dt = np.diff(t)
-    return 0.5 * (t[1:] + t[:-1]), att.dcm_to_rotvec(E) / dt[:, None]
+    zeta = nav_increments(np.ascontiguousarray(C_nb, dtype=float),
+                          np.ascontiguousarray(rotvec_b, dtype=float))
+    return 0.5 * (t[1:] + t[:-1]), zeta / np.diff(t)[:, None]
 
 
 def _derivative(t, x):
@@ -111,11 +140,9 @@ def omega_nb_b_euler(t, roll, pitch, heading):
 
     Heading is unwrapped first (a 359° → 1° step is +2°, not −358°).
     """
-    from selfnav.simulate.ship import euler_rates_to_body
-
     ang = np.column_stack([roll, pitch, np.unwrap(heading)])
     r = _derivative(np.asarray(t, float), ang)
-    return euler_rates_to_body(roll, pitch, r[:, 0], r[:, 1], r[:, 2])
+    return att.euler_rates_to_body(roll, pitch, r[:, 0], r[:, 1], r[:, 2])
 
 
 def omega_n_euler(t, omega_ib_b, C_nb):
@@ -195,38 +222,31 @@ def integrate_longitude(t, lon_rate, lon0):
 
 # ----------------------------------------------------------------------------- observer
 @numba.njit(cache=True)
-def _rodrigues(v):  # pragma: no cover - compiled
-    th2 = v[0] * v[0] + v[1] * v[1] + v[2] * v[2]
-    if th2 < 1e-8:
-        a = 1.0 - th2 / 6.0 + th2 * th2 / 120.0
-        b = 0.5 - th2 / 24.0 + th2 * th2 / 720.0
-    else:
-        th = np.sqrt(th2)
-        a = np.sin(th) / th
-        b = (1.0 - np.cos(th)) / th2
-    K = np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
-    return np.eye(3) + a * K + b * (K @ K)
-
-
-@numba.njit(cache=True)
 def _observer_kernel(dtheta, dt, C_bn_star, C_hat0, K, printed, drift):  # pragma: no cover
     n = dtheta.shape[0]
     out = np.empty((n, 3))
     err = np.empty(n)
     C_hat = C_hat0.copy()
+    R = np.empty((3, 3))
+    Cm = np.empty((3, 3))
+    E = np.empty((3, 3))
+    Wn = np.empty((3, 3))
     for k in range(n):
-        Cm = C_hat @ _rodrigues(dtheta[k] - drift * dt[k])   # Ĉ propagated with the gyros, (16)
+        v = dtheta[k] - drift * dt[k]
+        rodrigues(v[0], v[1], v[2], R)
+        mat3_mul(C_hat, R, Cm)                               # Ĉ propagated with the gyros, (16)
         Cs = C_bn_star[k + 1]
-        E = Cm - Cs                                          # Ĉ − C*
+        E[:, :] = Cm - Cs                                    # Ĉ − C*
         if printed:
             wb = dtheta[k] / dt[k]
             Wb = np.array([[0.0, -wb[2], wb[1]], [wb[2], 0.0, -wb[0]], [-wb[1], wb[0], 0.0]])
-            Wn = (E @ (K * Cs - Wb)) @ Cs.T                  # (20)-(22): Δ (K C − [ω_b]) C^T
+            Wn[:, :] = (E @ (K * Cs - Wb)) @ Cs.T            # (20)-(22): Δ (K C − [ω_b]) C^T
             C_hat = Cm - dt[k] * K * (E @ Cs)                # printed correction −(Ĉ − C*) K C
         else:
             a = 1.0 - np.exp(-K * dt[k])
-            Wn = (a / dt[k]) * (E @ Cs.T)                    # stable: [ω_n] ≈ K (Ĉ − C*) C*^T
-            C_hat = Cm - a * E                               # stable correction −K (Ĉ − C*)
+            mat3_mul(E, Cs.T, Wn)                            # stable: [ω_n] ≈ K (Ĉ − C*) C*^T
+            Wn *= a / dt[k]
+            C_hat[:, :] = Cm - a * E                         # stable correction −K (Ĉ − C*)
         out[k, 0] = 0.5 * (Wn[2, 1] - Wn[1, 2])
         out[k, 1] = 0.5 * (Wn[0, 2] - Wn[2, 0])
         out[k, 2] = 0.5 * (Wn[1, 0] - Wn[0, 1])
@@ -306,24 +326,15 @@ def low_pass(t, x, gain, y0=None):
     return _ema(x, a, np.ascontiguousarray(y0, float))
 
 
-@numba.njit(cache=True)
-def _cumulative_rotation(dtheta):  # pragma: no cover - compiled
-    n = dtheta.shape[0]
-    out = np.empty((n + 1, 3, 3))
-    C = np.eye(3)
-    out[0] = C
-    for k in range(n):
-        C = C @ _rodrigues(dtheta[k])
-        if k % 1000 == 999:  # re-orthonormalise (first order) against round-off
-            C = 1.5 * C - 0.5 * C @ C.T @ C
-        out[k + 1] = C
-    return out
-
-
 # ----------------------------------------------------------------------------- navigator
 @dataclass
 class MovingSolution:
-    """Output of :class:`MovingBaseNavigator` (rad, rad/s)."""
+    """Output of :class:`MovingBaseNavigator` and :func:`selfnav.moving_driver.navigate_moving`
+    (rad, rad/s, s).
+
+    ``sigma_terms`` holds the latitude σ per source (rad, arrays or scalars) when the driver
+    computed them; ``info`` the run's JSON-ready facts (time offset, rate convention, ...).
+    """
 
     t: np.ndarray
     lat: np.ndarray
@@ -336,12 +347,14 @@ class MovingSolution:
     method: str
     observer: str
     warnings: list = field(default_factory=list)
+    sigma_terms: dict = field(default_factory=dict)
+    info: dict = field(default_factory=dict)
 
     def summary(self) -> dict:
         """JSON-ready summary in degrees."""
         k0 = int(np.searchsorted(self.t, self.t[0] + 3.0 / self.gain))
         k0 = min(k0, len(self.t) - 1)
-        return {
+        out = {
             "samples": len(self.t), "duration_s": float(self.t[-1] - self.t[0]),
             "method": self.method, "observer": self.observer, "gain_per_s": self.gain,
             "latitude_end_deg": float(np.degrees(self.lat[-1])),
@@ -351,8 +364,48 @@ class MovingSolution:
             "sigma_lon_end_deg": float(np.degrees(self.sigma_lon[-1])),
             "transient_s": float(3.0 / self.gain),
             "branch_flips": int(np.count_nonzero(np.diff(self.branch))),
-            "warnings": list(self.warnings),
         }
+        if self.sigma_terms:   # RMS after the start-up transient
+            out["sigma_lat_terms_deg"] = {
+                k: float(np.degrees(np.sqrt(np.mean(np.square(np.broadcast_to(v, self.t.shape)[k0:])))))
+                for k, v in self.sigma_terms.items()}
+        out.update(self.info)
+        out["warnings"] = list(self.warnings)
+        return out
+
+    def resample(self, t) -> "MovingSolution":
+        """The solution at other times ``t`` inside its span (linear; longitude unwrapped)."""
+        t = np.asarray(t, float)
+        lon = np.interp(t, self.t, np.unwrap(self.lon))
+        k = np.clip(np.searchsorted(self.t, t, side="right") - 1, 0, len(self.t) - 1)
+
+        def lin(x):
+            x = np.asarray(x, float)
+            if x.ndim == 1:
+                return np.interp(t, self.t, x)
+            return np.column_stack([np.interp(t, self.t, c) for c in x.T])
+
+        terms = {n: (lin(v) if np.ndim(v) == 1 and len(v) == len(self.t) else v)
+                 for n, v in self.sigma_terms.items()}
+        return MovingSolution(t, lin(self.lat), (lon + np.pi) % (2 * np.pi) - np.pi,
+                              lin(self.omega_n), lin(self.sigma_lat), lin(self.sigma_lon),
+                              self.branch[k], self.gain, self.method, self.observer,
+                              list(self.warnings), terms, dict(self.info))
+
+    def to_csv(self, path, *, step_s: float = 0.0, comments=()):
+        """Write ``t, lat_deg, lon_deg, sigma_lat_deg, sigma_lon_deg`` atomically; with
+        ``step_s > 0`` one row per ``step_s`` seconds (and the last). Returns the row count."""
+        keep = np.ones(len(self.t), bool)
+        if step_s > 0:
+            b = np.floor((self.t - self.t[0]) / step_s)
+            keep = np.r_[True, np.diff(b) > 0]
+            keep[-1] = True
+        write_csv(path, {"t": self.t[keep], "lat_deg": np.degrees(self.lat[keep]),
+                         "lon_deg": np.degrees(self.lon[keep]),
+                         "sigma_lat_deg": np.degrees(self.sigma_lat[keep]),
+                         "sigma_lon_deg": np.degrees(self.sigma_lon[keep])},
+                  comments=list(comments), fmt={"t": "%.6f", "lat_deg": "%.9f", "lon_deg": "%.9f"})
+        return int(keep.sum())
 
 
 class MovingBaseNavigator:
@@ -366,8 +419,11 @@ class MovingBaseNavigator:
     observer : {"stable", "printed"} (``method="observer"`` only)
     smooth : a second first-order stage of time constant 1/K on ``ω_n`` (default on)
     drift_b : known gyro drift to remove, rad/s (3,)
-    sensor : dict with ``gyro_bias``, ``arw``, ``attitude_noise``, ``attitude_rate`` for the
-        sigmas (default: ``GRADES["navigation"]``)
+    sensor : dict with at least ``gyro_bias``, ``arw``, ``attitude_noise``, ``attitude_rate``
+        for the sigmas (default: :func:`grade_errors` of ``"navigation"``)
+
+    The attitude and the gyros must share one clock: :func:`selfnav.moving_driver.navigate_moving`
+    estimates and removes the offset between them; this class takes the times as given.
     """
 
     def __init__(self, lat0, lon0, *, gain=None, bandwidth_hz=None, method="observer",
@@ -382,34 +438,43 @@ class MovingBaseNavigator:
         self.lat0, self.lon0 = float(lat0), float(lon0)
         self.method, self.observer, self.smooth = method, observer, bool(smooth)
         self.drift_b = np.zeros(3) if drift_b is None else np.asarray(drift_b, float)
-        self.sensor = dict(GRADES["navigation"] if sensor is None else sensor)
+        self.sensor = dict(grade_errors("navigation") if sensor is None else sensor)
         self._obs = None
         self._state = None
         #: group delay of the filters (1/K per stage), compensated with φ̇ = −ω_ξ
-        self._lead = (2.0 if self.smooth else 1.0) / self.gain
+        self.lead = (2.0 if self.smooth else 1.0) / self.gain
 
     # -- batch
-    def run(self, t, C_nb, *, omega_ib_b=None, dtheta_b=None, rotvec_b=None) -> MovingSolution:
-        """Batch over ``t`` (N,), attitude ``C_nb`` (N, 3, 3) and gyro rates (N, 3), or raw
-        increments ``dtheta_b`` (N-1, 3) over ``[t_k, t_{k+1}]`` (coning corrected here), or
-        exact rotation vectors ``rotvec_b`` (N-1, 3)."""
+    def run(self, t, C_nb, *, omega_ib_b=None, dtheta_b=None, rotvec_b=None,
+            rates="interval-mean", body_rates=None) -> MovingSolution:
+        """Batch over ``t`` (N,) and attitude ``C_nb`` (N, 3, 3) measured at ``t``.
+
+        The gyros are one of: rate rows ``omega_ib_b`` (N, 3) in the convention ``rates``
+        (:func:`gyro_rotations`: ``"interval-mean"``, the package's, or ``"instantaneous"``);
+        raw increments ``dtheta_b`` (N-1, 3) over ``[t_k, t_{k+1}]`` (coning corrected here);
+        or rotation vectors ``rotvec_b`` (N-1, 3). ``body_rates`` (N, 3), the gyro rates *at*
+        ``t``, serve the ``euler`` form (default: instantaneous rows as given, otherwise
+        :func:`rates_at_knots`). The solution is at ``t[1:]``.
+        """
         t = np.asarray(t, float)
         C_nb = np.asarray(C_nb, float)
         if sum(x is not None for x in (omega_ib_b, dtheta_b, rotvec_b)) != 1:
             raise ValueError("give gyro rates, increments or rotation vectors (one of them)")
         if len(t) < 3:
             raise ValueError("at least 3 samples are needed")
+        check_rates(rates)
         dt = np.diff(t)
         if omega_ib_b is not None:
-            rv = gyro_increments(t, omega_ib_b)
+            rv = gyro_rotations(t, omega_ib_b, rates)
         else:
             rv = np.asarray(rotvec_b, float) if rotvec_b is not None else coning_increments(dtheta_b)
         K = self.gain
         t_out = t[1:]
         if self.method == "euler":
-            w_rate = (omega_ib_b if omega_ib_b is not None
-                      else np.vstack([rv[:1], rv]) / np.r_[dt[:1], dt][:, None])
-            raw = omega_n_euler(t, w_rate - self.drift_b, C_nb)[1:]
+            if body_rates is None:
+                body_rates = (np.asarray(omega_ib_b, float) if omega_ib_b is not None
+                              and rates == "instantaneous" else rates_at_knots(t, rv))
+            raw = omega_n_euler(t, body_rates - self.drift_b, C_nb)[1:]
         else:
             _, raw = omega_n_discrete(t, C_nb, rv - self.drift_b * dt[:, None])
         n_init = max(1, min(len(raw), int(np.searchsorted(t_out, t_out[0] + 1.0 / K))))
@@ -426,12 +491,15 @@ class MovingBaseNavigator:
         if self.smooth:
             w = low_pass(t_out, w, K, w0)
         lat, branch = latitude_track(w, self.lat0)
-        lat = lat + self._lead * (-w[:, 0])  # lag of the filters: φ̇ = −ω_ξ (seed (1))
+        lat = lat + self.lead * (-w[:, 0])  # lag of the filters: φ̇ = −ω_ξ (seed (1))
         lon_rate = longitude_rate(w, branch)
         t_all = np.r_[t[0], t_out]
         lon = integrate_longitude(t_all, np.r_[lon_rate[0], lon_rate], self.lon0)[1:]
+        # the same lag in λ̇: λ(t) ≈ λ0 + ∫λ̇_f + L (λ̇_f(t) − λ̇_f(t_0)) (exact for a steadily
+        # changing λ̇, the filters started at the mean over 1/K as here)
+        lon = lon + self.lead * (lon_rate - lon_rate[0])
         lon = (lon + np.pi) % (2 * np.pi) - np.pi
-        s_lat, s_lon = self._sigmas(t_out - t[0], w, dt)
+        s_lat, s_lon = self.sigmas(t_out - t[0], w, dt)
         warn = []
         A = np.hypot(w[:, 1], w[:, 2])
         if np.any(A < 0.1 * OMEGA_EARTH):
@@ -442,17 +510,29 @@ class MovingBaseNavigator:
         return MovingSolution(t_out, lat, lon, w, s_lat, s_lon, branch, K, self.method,
                               self.observer if self.method == "observer" else "-", warn)
 
-    def _sigmas(self, tau, w, dt):
+    def sigmas(self, tau, w, dt):
+        """Latitude and longitude σ (rad) of the sensor model at elapsed times ``tau`` for the
+        estimate ``w`` (:func:`error_budget`, plus the start-up transient)."""
         s = self.sensor
         # |Ω + λ̇| from the estimate, kept within [0.05, 2] Ω: a biased estimate must not
         # shrink the sigma (MEMS drifts make the measured |ω_n| many times Ω)
         A = np.clip(np.hypot(w[:, 1], w[:, 2]), 0.05 * OMEGA_EARTH, 2.0 * OMEGA_EARTH)
-        sig_w = error_budget(gain=self.gain, dt=float(np.median(dt)), smooth=self.smooth,
-                             **s)["rate_total"]
-        transient = np.exp(-self.gain * tau) * np.hypot(w[:, 1], w[:, 2])
-        s_lat = np.hypot(sig_w, transient) / A
+        terms = {k: s[k] for k in BUDGET_KEYS}
+        h = float(np.median(dt))
+        sig_w = error_budget(gain=self.gain, dt=h, smooth=self.smooth, **terms)["rate_total"]
+        # start: the filters begin at the mean of the raw ω_n over 1/K, whose error is √2 × the
+        # one-stage σ (the white parts averaged over 1/K); it decays as (1 + Kτ) e^{−Kτ} (two
+        # stages) or e^{−Kτ}. In the longitude its integral (2/K or 1/K × the error) is taken
+        # back by the lag compensation's −L λ̇_f(t₀), which leaves L × the filtered white noise
+        K = self.gain
+        sig_w0 = np.sqrt(2.0) * error_budget(gain=K, dt=h, smooth=False, **terms)["rate_total"]
+        decay = (1.0 + K * tau) * np.exp(-K * tau) if self.smooth else np.exp(-K * tau)
+        s_lat = np.minimum(np.hypot(sig_w, decay * sig_w0) / A, np.pi / 2)   # 90°: no information
         rate_bias = np.hypot(s["gyro_bias"], s["attitude_rate"])
-        s_lon = np.sqrt((rate_bias * tau) ** 2 + s["arw"] ** 2 * tau + s["attitude_noise"] ** 2)
+        white = error_budget(gain=K, dt=h, smooth=self.smooth,
+                             **dict(terms, gyro_bias=0.0, attitude_rate=0.0))["rate_total"]
+        s_lon = np.sqrt((rate_bias * tau) ** 2 + s["arw"] ** 2 * tau + s["attitude_noise"] ** 2
+                        + (self.lead * white) ** 2)
         return s_lat, s_lon
 
     # -- streaming
@@ -477,8 +557,10 @@ class MovingBaseNavigator:
         lat, s = latitude_track(w[None], st["lat"])
         lr = longitude_rate(w, s[0])
         st["lon"] += 0.5 * dt * (lr + st["lon_rate"]) if st["lon_rate"] is not None else dt * lr
+        if st["lon_rate"] is None:
+            st["lon_rate0"] = lr
         st["lon_rate"], st["lat"] = lr, float(lat[0])
-        return st["lat"] - self._lead * w[0], st["lon"]
+        return st["lat"] - self.lead * w[0], st["lon"] + self.lead * (lr - st["lon_rate0"])
 
     def start(self, C_nb0):
         """Initialise streaming from the first attitude ``C_n^b`` (streaming always runs the
@@ -506,69 +588,6 @@ def rate_error_to_position(omega_n, d_omega_n):
     A = np.where(w[..., 1] >= 0, 1.0, -1.0) * np.hypot(w[..., 1], w[..., 2])
     c, s = np.cos(lat), np.sin(lat)
     return (c * d[..., 2] - s * d[..., 1]) / A, c * d[..., 1] + s * d[..., 2]
-
-
-def error_budget(*, gyro_bias, arw, attitude_noise, attitude_rate, gain, dt,
-                 smooth=True, lat_rate=0.0, A=None) -> dict:
-    """Latitude error (rad, 1σ) per source for gain K, and the longitude drift rate.
-
-    Per navigation axis, the ``ω_n`` error is: gyro bias ``b``; attitude-error drift rate ``r``;
-    angle random walk ``N`` filtered: ``N √(K/4)`` (two stages; ``N √(K/2)`` one stage);
-    white attitude noise ``σ_δ`` per sample differenced by the Poisson equation and filtered:
-    ``σ_δ √(Δt K³/4)`` (two stages; ``K σ_δ`` one stage — the seed's "larger K, larger effect of
-    δ"). Each divided by ``A = Ω + λ̇`` is a latitude error; the lag is ``φ̇ · 2/K`` (``1/K``).
-    The longitude error grows as ``√(b² + r²) t`` plus the random walk ``N √t``.
-    """
-    K = float(gain)
-    A = OMEGA_EARTH if A is None else float(A)
-    stages = 2 if smooth else 1
-    rate = {
-        "gyro_bias": float(gyro_bias),
-        "attitude_rate": float(attitude_rate),
-        "arw": float(arw) * np.sqrt(K / (2.0 * stages)),
-        "attitude_noise": float(attitude_noise) * (np.sqrt(dt * K**3 / 4.0) if smooth else K),
-    }
-    total = float(np.sqrt(sum(v * v for v in rate.values())))
-    lag = abs(lat_rate) * stages / K
-    out = {f"lat_{k}": v / A for k, v in rate.items()}
-    out.update(rate_total=total, lat_lag=lag, lat_total=float(np.hypot(total / A, lag)),
-               lon_rate_error=float(np.hypot(gyro_bias, attitude_rate)), gain=K)
-    return out
-
-
-def _noise_gain(g, dt, target):
-    """Largest K whose filtered noise equals ``target`` rad/s (two stages)."""
-    from scipy.optimize import brentq
-
-    def f(lk):
-        var = g["arw"] ** 2 * np.exp(lk) / 4 + g["attitude_noise"] ** 2 * dt * np.exp(3 * lk) / 4
-        return np.log(var) - 2 * np.log(target)
-
-    return float(np.exp(brentq(f, -30.0, 10.0)))
-
-
-def grade_table(dt=0.01, grades=None, hours=1.0) -> list:
-    """Accuracy each sensor grade can reach (rad) and the averaging time it needs.
-
-    The bias floor ``√(b² + r²)/Ω`` cannot be averaged away; the gain at which the filtered
-    noise equals it sets the time constant 1/K (equivalent averaging time 4/K). Verdict: usable
-    below 0.1°, marginal below 1°, otherwise not usable.
-    """
-    rows = []
-    for name, g in (grades or GRADES).items():
-        floor_rate = float(np.hypot(g["gyro_bias"], g["attitude_rate"]))
-        K = _noise_gain(g, dt, floor_rate)
-        floor = floor_rate / OMEGA_EARTH
-        sig = error_budget(gain=K, dt=dt, **g)["lat_total"]
-        deg = np.degrees(sig)
-        rows.append({"grade": name, "gyro_bias_deg_h": g["gyro_bias"] / DEG_PER_H,
-                     "arw_deg_rth": g["arw"] / DEG_PER_RTH, "attitude_noise_deg": g["attitude_noise"] / DEG,
-                     "attitude_rate_deg_h": g["attitude_rate"] / DEG_PER_H,
-                     "lat_floor_deg": float(np.degrees(floor)), "gain_per_s": K,
-                     "time_constant_s": 1.0 / K, "lat_sigma_deg": float(deg),
-                     "lon_error_deg": float(np.degrees(floor_rate * hours * 3600.0)),
-                     "verdict": "usable" if deg < 0.1 else ("marginal" if deg < 1.0 else "not usable")})
-    return rows
 
 
 # ----------------------------------------------------------------------------- seed example
@@ -604,70 +623,3 @@ def seed_steady_error(t, drift_b, *, gain=50.0):
     C = att.rotvec_to_dcm(-SEED_OMEGA_N * t[:, None]) @ att.rotvec_to_dcm(SEED_OMEGA_B * t[:, None])
     v = np.linalg.solve(gain * np.eye(3) + att.skew(SEED_OMEGA_B), np.asarray(drift_b, float))
     return gain * C @ v
-
-
-def plot_seed_fig3(path, *, gain=50.0, t_end=8.0, dt=1e-3):
-    """Fig. 3-like plot: ``ω_n`` error vs time, drift ~1 °/h (a) and ~0.1 °/h (b), both forms."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, axes = plt.subplots(2, 1, figsize=(8, 7), sharex=True)
-    for ax, scale, lab in zip(axes, (1e-6, 1e-7), ("a) drift (4, 6, 9)·1e-6 s⁻¹ (~1 °/h)",
-                                                   "b) drift (4, 6, 9)·1e-7 s⁻¹ (~0.1 °/h)")):
-        drift = np.array([4.0, 6.0, 9.0]) * scale
-        t, e, _ = seed_example(drift, gain=gain, t_end=t_end, dt=dt)
-        tp, ep, _ = seed_example(drift, gain=gain, form="printed", t_end=t_end, dt=dt)
-        for j, c in enumerate("xyz"):
-            ax.plot(t, e[:, j], lw=1.2, label=f"stable, δω_{'ξηζ'[j]}", color=f"C{j}")
-            ax.plot(tp, np.clip(ep[:, j], -1e3, 1e3), lw=0.8, ls="--", color=f"C{j}",
-                    label=f"printed (16), δω_{'ξηζ'[j]}")
-        lim = 2.5 * np.linalg.norm(drift)
-        ax.set_ylim(-lim, lim)
-        ax.set_ylabel("ω_n error, s⁻¹")
-        ax.set_title(f"{lab}, K = {gain:g}", fontsize=10)
-        ax.grid(alpha=0.3)
-    axes[0].legend(fontsize=7, ncol=2, loc="lower left")
-    axes[1].set_xlabel("t, s (simulated; printed form leaves the plot when it diverges)")
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
-
-
-def monte_carlo(grades=("navigation", "tactical"), *, n_runs=40, duration=900.0, dt=0.05,
-                lat0=np.radians(45.0), seed=0) -> dict:
-    """Monte Carlo of the latitude error per grade on a simulated ship, against :func:`error_budget`.
-
-    Each run draws a gyro bias ``N(0, b²)`` per axis, white gyro noise of ARW ``N``, white
-    attitude noise ``σ_δ`` per sample and an attitude-error ramp of rate ``N(0, r²)`` per axis;
-    the gain is the one :func:`grade_table` picks. The error is sampled at four times after the
-    transient (5/K); returns ``{grade: {"rms_deg", "predicted_deg", "ratio", "gain"}}``.
-    """
-    from selfnav.simulate.ship import exact_body_rates, ship_trajectory
-
-    tr = ship_trajectory(duration, dt, lat0, 0.0)
-    w_true = exact_body_rates(tr)
-    C_bn = np.swapaxes(tr.C_nb, -1, -2)
-    rng = np.random.default_rng(seed)
-    table = {r["grade"]: r for r in grade_table(dt)}
-    out = {}
-    for name in grades:
-        g, K = GRADES[name], table[name]["gain_per_s"]
-        t_eval = tr.t[-1] - np.array([0.0, 1.0, 2.0, 3.0]) * (duration - 5.0 / K) / 4.0
-        errs = []
-        for _ in range(n_runs):
-            w = (w_true + rng.normal(0, g["gyro_bias"], 3)
-                 + rng.normal(0, g["arw"] / np.sqrt(dt), w_true.shape))
-            eps = (rng.normal(0, g["attitude_noise"], w_true.shape)
-                   + np.outer(tr.t, rng.normal(0, g["attitude_rate"], 3)))
-            C_star = np.swapaxes(att.rotvec_to_dcm(eps) @ C_bn, -1, -2)
-            sol = MovingBaseNavigator(lat0, 0.0, gain=K).run(tr.t, C_star, omega_ib_b=w)
-            k = np.searchsorted(sol.t, t_eval)
-            errs.append(sol.lat[k] - tr.lat[k + 1])
-        rms = float(np.sqrt(np.mean(np.square(errs))))
-        pred = error_budget(gain=K, dt=dt, **g)["lat_total"]
-        out[name] = {"rms_deg": np.degrees(rms), "predicted_deg": np.degrees(pred),
-                     "ratio": rms / pred, "gain": K, "runs": n_runs}
-    return out

@@ -2,19 +2,22 @@
 
 Figures are drawn with matplotlib's Agg backend (no display needed), written as PNG and embedded
 in ``report.html`` as base64 data so that the page is one file that can be mailed or archived.
-Every file is written atomically (temporary file moved into place).
+The four files are written as one set (:func:`selfnav.io.output.atomic_folder`): an interrupt
+leaves the old report or the new one.
 """
 from __future__ import annotations
 
 import base64
 import html
-import io
 import json
 from pathlib import Path
 
 import numpy as np
 
-from selfnav.io.csvio import atomic_write_bytes
+from selfnav.io.output import atomic_folder, atomic_write_bytes, figure_png
+
+#: The files of a report (an older report's files are replaced as a set).
+REPORT_FILES = ("errors.png", "track.png", "metrics.json", "report.html")
 
 
 def _pyplot():
@@ -27,10 +30,10 @@ def _pyplot():
 
 
 def _png(fig) -> bytes:
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=110, bbox_inches="tight")
-    _pyplot().close(fig)
-    return buf.getvalue()
+    try:
+        return figure_png(fig, 110, bbox_inches="tight")
+    finally:
+        _pyplot().close(fig)
 
 
 def error_figure(ev) -> bytes:
@@ -141,19 +144,17 @@ def write_report(ev, out_dir, *, roads=None, title: str = "selfnav evaluation",
     Returns ``{name: path}`` of the files written.
     """
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
     figs = {"errors.png": error_figure(ev), "track.png": track_figure(ev, roads)}
-    paths = {}
-    for name, png in figs.items():
-        paths[name] = str(atomic_write_bytes(out / name, png))
     metrics = dict(ev.metrics)
     if sources:
         metrics = {**{k: str(v) for k, v in sources.items()}, **metrics}
     clean = {k: (None if isinstance(v, float) and not np.isfinite(v) else v)
              for k, v in metrics.items()}
-    paths["metrics.json"] = str(atomic_write_bytes(
-        out / "metrics.json", json.dumps(clean, indent=2, default=float).encode()))
     page = html_page(title, metrics, {"Error against time": figs["errors.png"],
                                       "Track": figs["track.png"]}, ev.warnings)
-    paths["report.html"] = str(atomic_write_bytes(out / "report.html", page.encode("utf-8")))
-    return paths
+    data = {**figs, "metrics.json": json.dumps(clean, indent=2, default=float).encode(),
+            "report.html": page.encode("utf-8")}
+    with atomic_folder(out, owned=REPORT_FILES) as tmp:
+        for name, content in data.items():
+            atomic_write_bytes(tmp / name, content)
+    return {name: str(out / name) for name in data}

@@ -22,7 +22,6 @@ stationary σ_GM has its Allan-deviation peak ``0.617 σ_GM`` at ``T ≈ 1.89 τ
 from __future__ import annotations
 
 import dataclasses
-import datetime as _dt
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -263,30 +262,18 @@ _R_REF = 6371200.0
 def earth_field_n(lat, lon, h=0.0, date=None, model: str = "auto"):
     """Earth magnetic field in ENU, nT, shape ``(..., 3)``.
 
-    ``model="igrf"`` uses the maintained IGRF package ``ppigrf`` (IGRF-14, optional dependency);
-    ``"dipole"`` the IGRF-13 (2020) tilted dipole, good to a few degrees in declination in
-    mid-latitudes and not near the magnetic poles (geodetic latitude used as geocentric);
-    ``"auto"`` picks ``igrf`` when ``ppigrf`` is importable.
+    ``model="igrf"`` (and ``"auto"``) is IGRF-14 shipped with the package
+    (:func:`selfnav.igrf.igrf_enu`, at ``date``, default 2025-01-01); ``"dipole"`` the IGRF-13
+    (2020) tilted dipole, kept for comparison: it is wrong by tens of degrees in declination in
+    places (−17.6° at Kotka where IGRF gives +11.0°).
     """
     lat = np.asarray(lat, dtype=float)
     lon = np.asarray(lon, dtype=float)
     h = np.asarray(h, dtype=float)
-    if model == "auto":
-        from importlib.util import find_spec
+    if model in ("auto", "igrf"):
+        from selfnav.igrf import igrf_enu
 
-        model = "igrf" if find_spec("ppigrf") is not None else "dipole"
-    if model == "igrf":
-        try:
-            import ppigrf
-        except ImportError:
-            raise SelfnavError("magnetic model 'igrf' needs the package ppigrf "
-                               "(pip install ppigrf), or use model='dipole'") from None
-        date = date or _dt.datetime(2025, 1, 1)
-        la, lo, hh = np.broadcast_arrays(lat, lon, h)
-        be, bn, bu = ppigrf.igrf(np.degrees(lo).ravel(), np.degrees(la).ravel(),
-                                 hh.ravel() / 1000.0, date)
-        out = np.stack([np.ravel(be), np.ravel(bn), np.ravel(bu)], -1)
-        return out.reshape(la.shape + (3,))
+        return igrf_enu(lat, lon, h, date)
     if model != "dipole":
         raise SelfnavError(f"unknown magnetic field model '{model}' (igrf, dipole, auto)")
     th = np.pi / 2 - lat

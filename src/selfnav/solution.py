@@ -13,11 +13,10 @@ from pathlib import Path
 
 import numpy as np
 
-from selfnav import attitude as att
 from selfnav import datum as dm
 from selfnav.io.csvio import read_table, write_csv
 from selfnav.io.psins_mat import header_of
-from selfnav.io.trajectory import TRUTH_COLUMNS, read_truth
+from selfnav.io.trajectory import TRUTH_COLUMNS, read_truth, trajectory_columns
 from selfnav.types import Trajectory
 
 #: per-row columns of a solution file besides the trajectory's, with their CSV formats
@@ -78,13 +77,7 @@ class Solution:
         lat, lon, h = tr.lat, tr.lon, tr.h
         if dm.datum_key(datum) != "wgs84":
             lat, lon, h = dm.convert(lat, lon, h, "wgs84", datum)
-        cols = {"t": tr.t, "lat_deg": np.degrees(lat), "lon_deg": np.degrees(lon), "h_m": h}
-        if np.all(np.isfinite(tr.velocity_n)):
-            cols.update(ve=tr.velocity_n[:, 0], vn=tr.velocity_n[:, 1], vu=tr.velocity_n[:, 2])
-        if np.all(np.isfinite(tr.C_nb)):
-            roll, pitch, hdg = att.euler_from_dcm_nb(tr.C_nb)
-            cols.update(roll_deg=np.degrees(roll), pitch_deg=np.degrees(pitch),
-                        heading_deg=np.degrees(hdg))
+        cols = trajectory_columns(tr, lat, lon, h)
         if self.sigma_enu is not None:
             cols.update(sigma_e_m=self.sigma_enu[:, 0], sigma_n_m=self.sigma_enu[:, 1],
                         sigma_u_m=self.sigma_enu[:, 2])

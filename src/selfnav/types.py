@@ -188,6 +188,10 @@ class OdometerData:
     def __len__(self) -> int:
         return len(self.t)
 
+    def select(self, mask) -> "OdometerData":
+        """A subset of the samples (index array, slice or boolean mask)."""
+        return OdometerData(self.t[mask], self.speed_mps[mask], self.source, dict(self.meta))
+
     def shifted(self, dt_s: float) -> "OdometerData":
         """The same samples with ``dt_s`` added to every time stamp."""
         return replace(self, t=self.t + dt_s, meta=dict(self.meta))

@@ -2,61 +2,35 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Optional
+from typing import Annotated, Optional
 
-import numpy as np
 import typer
 
+from selfnav.cli import options as opt
 from selfnav.cli.common import emit_json
-
-RAD_S_TO_DEG_H = np.degrees(1.0) * 3600.0
-SQRT_S_TO_SQRT_H = 60.0  # (x)/√s -> (x)/√h
-
-
-def summary(res: dict) -> dict:
-    """The DESIGN §6 keys (lists of three, x y z) plus the details, in the units named."""
-    g, a = res["gyro"], res["accel"]
-    return {
-        "arw_deg_per_sqrt_h": [np.degrees(x.white) * SQRT_S_TO_SQRT_H for x in g],
-        "bias_instability_deg_per_h": [x.bias_instability * RAD_S_TO_DEG_H for x in g],
-        "vrw_m_per_s_per_sqrt_h": [x.white * SQRT_S_TO_SQRT_H for x in a],
-        "accel_bias_instability_m_per_s2": [x.bias_instability for x in a],
-        "gyro_rate_random_walk_deg_per_h_per_sqrt_h": [
-            x.random_walk * RAD_S_TO_DEG_H * SQRT_S_TO_SQRT_H for x in g],
-        "accel_random_walk_m_per_s2_per_sqrt_h": [x.random_walk * SQRT_S_TO_SQRT_H for x in a],
-        "gyro_bias_instability_tau_s": [x.bias_instability_tau for x in g],
-        "accel_bias_instability_tau_s": [x.bias_instability_tau for x in a],
-        "gyro_bias_instability_is_upper_bound": [x.bias_instability_bound for x in g],
-        "accel_bias_instability_is_upper_bound": [x.bias_instability_bound for x in a],
-        "samples": res["samples"], "dt_s": res["dt"],
-    }
 
 
 def register(app: typer.Typer) -> None:
     @app.command("allan")
     def allan_cmd(
-        imu: Path = typer.Argument(..., help="IMU record at rest (CSV or PSINS .imu)."),
-        fmt: str = typer.Option("auto", "--format", help="csv, psins or auto (by extension)."),
-        as_json: bool = typer.Option(False, "--json", help="Print one JSON object."),
-        plot: Optional[Path] = typer.Option(None, "--plot", help="Log-log plot PNG (default "
-                                            "<IMU name>_allan.png in the current folder)."),
-        no_plot: bool = typer.Option(False, "--no-plot", help="Do not write the plot."),
+        imu: opt.ImuArgument,
+        imu_format: opt.ImuFormat = "auto",
+        as_json: opt.Json = False,
+        plot: Annotated[Optional[Path], typer.Option(
+            "--plot", help="Write the log-log plot to this PNG FILE (no plot without it).")] = None,
+        fmt_old: opt.ImuFormatOld = None,
+        no_plot: Annotated[bool, typer.Option("--no-plot", hidden=True,
+                                              help="Ignored (no plot is the default).")] = False,
     ):
-        """Allan deviation of gyros and accelerometers; ARW, VRW, bias instability, random walk."""
-        from selfnav.allan import analyze_imu, plot_allan
-        from selfnav.errors import InputError
-        from selfnav.io.readers import read_imu
+        """Allan deviation of gyros and accelerometers at rest: ARW, VRW, bias instability,
+        rate random walk. Gaps: the longest gap-free stretch is analysed (a warning says so)."""
+        from selfnav import api
+        from selfnav.io.output import check_output_file
 
-        data = read_imu(imu, fmt)
-        if len(data) < 100:
-            raise InputError(imu, f"has {len(data)} samples: too short for an Allan analysis")
-        res = analyze_imu(data)
-        out = summary(res)
-        if not no_plot:
-            name = imu.name.split(".")[0]
-            path = plot or Path(f"{name}_allan.png")
-            plot_allan(res, path, f"Allan deviation: {imu.name}")
-            out["plot"] = str(path)
+        if plot is not None:
+            check_output_file(plot, (".png",))
+        data = api.read_imu(imu, fmt_old or imu_format)
+        out = api.allan_noise(data, plot=plot, title=f"Allan deviation: {imu.name}")
         if as_json:
             emit_json(out)
             return

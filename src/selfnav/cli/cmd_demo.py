@@ -5,14 +5,16 @@ from pathlib import Path
 
 import typer
 
+from selfnav.cli import options as opt
 from selfnav.cli.common import emit_json
 
 
 def register(app: typer.Typer) -> None:
     @app.command("demo")
     def demo_cmd(
-        out: Path = typer.Option(Path("selfnav-demo"), help="Folder for the report."),
-        as_json: bool = typer.Option(False, "--json", help="Print one JSON object."),
+        out: opt.out_folder("Folder for the report (index.html, latitude.json, two PNG "
+                            "plots).") = Path("selfnav-demo"),
+        as_json: opt.Json = False,
     ):
         """Latitude from the shipped real RLG recording (Xi'an); report in OUT/index.html."""
         from selfnav.demo import SITE_LAT_DEG, run_demo

@@ -1,52 +1,49 @@
 """``selfnav evaluate``: errors of a solution against truth, plots, an HTML report (DESIGN §6)."""
 from __future__ import annotations
 
-import sys
 from pathlib import Path
-from typing import Optional
+from typing import Annotated, Optional
 
 import typer
 
+from selfnav.cli import options as opt
 from selfnav.cli.common import emit_json
 
 
 def register(app: typer.Typer) -> None:
     @app.command("evaluate")
     def evaluate_cmd(
-        truth: Path = typer.Option(..., "--truth", help="Truth CSV (t, lat_deg, lon_deg[, h_m, "
-                                   "ve, vn, vu, roll_deg, pitch_deg, heading_deg]), WGS-84."),
-        solution: Path = typer.Option(..., "--solution", help="Solution CSV, same columns."),
-        as_json: bool = typer.Option(False, "--json", help="Print one JSON object."),
-        report: Optional[Path] = typer.Option(None, "--report", help="Folder for errors.png, "
-                                              "track.png, metrics.json and report.html."),
-        map_path: Optional[Path] = typer.Option(None, "--map", help="Road map (OpenStreetMap "
-                                                ".osm/.osm.pbf): road-relative along/cross-track "
-                                                "and the map under the track (needs "
-                                                "selfnav.roads.graph)."),
+        truth: Annotated[Path, typer.Option(
+            "--truth", help="Truth CSV (t, lat_deg, lon_deg[, h_m, ve, vn, vu, roll_deg, "
+                            "pitch_deg, heading_deg]), WGS-84.")],
+        solution: Annotated[Path, typer.Option(
+            "--solution", help="Solution CSV, same columns.")],
+        as_json: opt.Json = False,
+        report: Annotated[Optional[Path], typer.Option(
+            "--report", help="Write errors.png, track.png, metrics.json and report.html into "
+                             "this FOLDER (created with its parents; the four files are "
+                             "replaced as one set).")] = None,
+        map_path: Annotated[Optional[Path], typer.Option(
+            "--map", help="Road map (OpenStreetMap .osm/.osm.pbf): road-relative "
+                          "along/cross-track and the map under the track.")] = None,
     ):
-        """Horizontal RMS / 95 % / max and vertical RMS error; along/cross-track."""
-        from selfnav.evaluate import evaluate, load_road_polylines
-        from selfnav.io.trajectory import read_truth
+        """Horizontal RMS / 95 % / max and vertical RMS error; along/cross-track; coverage
+        (the share of the solution compared: the truth is never interpolated across its
+        holes)."""
+        from selfnav import api
+        from selfnav.io.output import check_output_folder
 
-        tr = read_truth(truth)
-        sol = read_truth(solution)
-        roads = load_road_polylines(map_path) if map_path is not None else None
-        ev = evaluate(tr, sol, roads=roads, truth_name=str(truth), solution_name=str(solution))
-        out = {"truth": str(truth), "solution": str(solution), **ev.metrics,
-               "warnings": list(ev.warnings)}
         if report is not None:
-            from selfnav.report import write_report
-
-            files = write_report(ev, report, roads=roads,
-                                 title=f"selfnav evaluate: {solution.name} against {truth.name}",
-                                 sources={"truth": truth, "solution": solution})
-            out["report"] = files["report.html"]
-            out["figures"] = [files["errors.png"], files["track.png"]]
+            check_output_folder(report)
+        out = api.evaluate_report(truth, solution, roads=map_path, report=report,
+                                  title=f"selfnav evaluate: {solution.name} against "
+                                        f"{truth.name}")
         if as_json:
             emit_json(out)
             return
-        m = ev.metrics
-        print(f"{solution} against {truth}: {m['samples']} epochs over {m['duration_s']:.1f} s")
+        m = out
+        print(f"{solution} against {truth}: {m['samples']} epochs over {m['duration_s']:.1f} s "
+              f"({100 * m['coverage']:.1f} % of the solution)")
         print(f"  horizontal  RMS {m['horizontal_rms_m']:.3f} m   95 % {m['horizontal_p95_m']:.3f}"
               f" m   max {m['horizontal_max_m']:.3f} m")
         print(f"  vertical    RMS {m['vertical_rms_m']:.3f} m   max {m['vertical_max_m']:.3f} m")
@@ -55,7 +52,5 @@ def register(app: typer.Typer) -> None:
         if "road_along_track_rms_m" in m:
             print(f"  along-track RMS {m['road_along_track_rms_m']:.3f} m   cross-track RMS "
                   f"{m['road_cross_track_rms_m']:.3f} m (road)")
-        for w in ev.warnings:
-            print(f"  note: {w}", file=sys.stderr)
         if report is not None:
             print(f"  report: {out['report']}")

@@ -2,20 +2,20 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import List, Optional
+from typing import Annotated, List, Optional
 
 import numpy as np
 import typer
 
+from selfnav.cli import options as opt
 from selfnav.cli.common import emit_json
 from selfnav.errors import SelfnavError
 
 
 def _requirements(lat_deg: float, seed_constants: bool, as_json: bool) -> None:
-    from selfnav.latitude import SEED_TABLE_DPHI_DEG, requirements_table
+    from selfnav import api
 
-    tab = requirements_table(SEED_TABLE_DPHI_DEG, lat_deg, seed_constants=seed_constants)
-    rows = [dict(zip(tab, vals)) for vals in zip(*tab.values())]
+    rows = api.latitude_requirements(lat_deg, seed_constants=seed_constants)
     if as_json:
         emit_json({"latitude_deg": lat_deg, "seed_constants": seed_constants, "rows": rows})
         return
@@ -30,49 +30,57 @@ def _requirements(lat_deg: float, seed_constants: bool, as_json: bool) -> None:
 def register(app: typer.Typer) -> None:
     @app.command("latitude")
     def latitude_cmd(
-        imu: Optional[List[Path]] = typer.Argument(
-            None, help="IMU file(s) at rest; several files = several positions."),
-        fmt: str = typer.Option("auto", "--format", help="csv, psins or auto (by extension)."),
-        method: str = typer.Option("optimal", help="optimal (reaches the Cramér–Rao bound) or "
-                                   "seed (formula (1.4) with Ω = 15.041 °/h, g = 9.81)."),
-        rest: str = typer.Option("auto", help="auto, still or disturbed (compensate tilt changes "
-                                 "seen by the accelerometers)."),
-        h_m: Optional[float] = typer.Option(None, "--h-m", help="Height for the gravity check, m."),
-        as_json: bool = typer.Option(False, "--json", help="Print one JSON object."),
-        budget: bool = typer.Option(False, help="Also print the error budget per sensor error."),
-        gyro_bias_deg_h: float = typer.Option(0.005, help="Gyro bias for --budget, deg/h."),
-        accel_bias_ug: float = typer.Option(50.0, help="Accelerometer bias for --budget, µg."),
-        requirements: bool = typer.Option(False, "--requirements", help="Print the seed's "
-                                          "sensor-requirements table instead (no IMU needed)."),
-        lat_deg: float = typer.Option(60.0, "--lat-deg", help="Latitude for --requirements."),
-        seed_constants: bool = typer.Option(False, help="--requirements with the seed's own "
-                                            "constants (reproduces its printed table)."),
+        imu: Annotated[Optional[List[Path]], typer.Argument(
+            help="IMU file(s) at rest; several files = several positions.")] = None,
+        imu_format: opt.ImuFormat = "auto",
+        method: Annotated[str, opt.choice_option(
+            "--method", choices=("optimal", "seed"),
+            help="optimal (reaches the Cramér–Rao bound) or seed (formula (1.4) with "
+                 "Ω = 15.041 °/h, g = 9.81).")] = "optimal",
+        rest: Annotated[str, opt.choice_option(
+            "--rest", choices=("auto", "still", "disturbed"),
+            help="disturbed: compensate tilt changes seen by the accelerometers; auto: when "
+                 "they are significant.")] = "auto",
+        h_m: Annotated[Optional[float], typer.Option(
+            "--h-m", min=-1000.0, max=100000.0, help="Height for the gravity check, m.")] = None,
+        as_json: opt.Json = False,
+        budget: Annotated[bool, typer.Option(
+            "--budget", help="Also print the error budget per sensor error.")] = False,
+        gyro_bias_deg_h: Annotated[float, typer.Option(
+            help="Gyro bias for --budget, deg/h.")] = 0.005,
+        accel_bias_ug: Annotated[float, typer.Option(
+            help="Accelerometer bias for --budget, µg.")] = 50.0,
+        requirements: Annotated[bool, typer.Option(
+            "--requirements", help="Print the seed's sensor-requirements table instead (no IMU "
+                                   "needed).")] = False,
+        lat_deg: opt.latitude_deg("--lat-deg", help="Latitude for --requirements, deg.") = 60.0,
+        seed_constants: Annotated[bool, typer.Option(
+            "--seed-constants", help="--requirements with the seed's own constants (reproduces "
+                                     "its printed table).")] = False,
+        fmt_old: opt.ImuFormatOld = None,
     ):
-        """Latitude (and heading, pitch, roll) of a site from an IMU at rest (seed 000)."""
-        from selfnav import latitude as lat_mod
-        from selfnav.io.readers import read_imu_positions
+        """Latitude (and heading, pitch, roll) of a site from an IMU at rest (seed 000).
+        Gaps: the longest gap-free stretch is used (a warning says so)."""
+        from selfnav import api
 
         if requirements:
             _requirements(lat_deg, seed_constants, as_json)
             return
         if not imu:
             raise SelfnavError("give an IMU file (or --requirements); see selfnav latitude --help")
-        data = read_imu_positions(imu, fmt)
+        data = api.read_imu_positions(imu, fmt_old or imu_format)
         multi = data.position is not None and len(np.unique(data.position)) > 1
-        if multi:
-            res = lat_mod.estimate_latitude_multiposition(data, h=h_m)
-        else:
-            res = lat_mod.estimate_latitude(data, method=method, rest=rest, h=h_m)
+        kw = {"h": h_m} if multi else {"rest": rest, "h": h_m}
+        res = api.estimate_latitude(data, method=method, **kw)
         out = res.to_dict()
         if budget:
-            b = lat_mod.error_budget(res, gyro_bias_deg_h * lat_mod.DEG_PER_H,
-                                     accel_bias_ug * 1e-6 * lat_mod.G_STD)
-            out["error_budget_deg"] = {k: float(np.degrees(v)) for k, v in b.items()}
+            out["error_budget_deg"] = api.latitude_error_budget(
+                res, gyro_bias_deg_h=gyro_bias_deg_h, accel_bias_ug=accel_bias_ug)
         if as_json:
             emit_json(out)
             return
-        src = data.source
-        print(f"{src}: {out['samples']} samples, {out['duration_s']:.1f} s, method {out['method']}")
+        print(f"{data.source}: {out['samples']} samples, {out['duration_s']:.1f} s, method "
+              f"{out['method']}")
         print(f"  latitude  {out['latitude_deg']:.5f}° ± {out['sigma_deg']:.5f}° (1σ; noise "
               f"{out['sigma_noise_deg']:.5f}°)")
         print(f"  heading   {out['heading_deg']:.3f}° ± {out['sigma_heading_deg']:.3f}°   pitch "
@@ -86,8 +94,6 @@ def register(app: typer.Typer) -> None:
         if budget:
             print("  error budget (deg): " + ", ".join(
                 f"{k} {v:.2e}" for k, v in out["error_budget_deg"].items()))
-        for w in out["warnings"]:
-            print(f"  note: {w}")
         if "lat0_deg" in data.meta:
             print(f"  (file header site latitude {data.meta['lat0_deg']}°: difference "
                   f"{out['latitude_deg'] - data.meta['lat0_deg']:+.4f}°)")

@@ -1,11 +1,11 @@
 """``selfnav montecarlo``: seeded Monte Carlo of a (scenario, method) pair on Dask."""
 from __future__ import annotations
 
-from pathlib import Path
-from typing import List, Optional
+from typing import Annotated, List, Optional
 
 import typer
 
+from selfnav.cli import options as opt
 from selfnav.cli.common import emit_json
 from selfnav.errors import SelfnavError
 
@@ -23,25 +23,26 @@ def _parse_sets(items) -> dict:
 def register(app: typer.Typer) -> None:
     @app.command("montecarlo")
     def montecarlo_cmd(
-        scenario: Optional[str] = typer.Argument(None, help="Registered scenario (see --list), "
+        scenario: Optional[str] = typer.Argument(None, metavar="SCENARIO", help="Registered scenario (see --list), "
                                                  "e.g. static-latitude."),
-        runs: int = typer.Option(100, "--runs", help="Number of seeded runs."),
-        workers: int = typer.Option(2, "--workers", help="Local Dask workers (processes, one "
-                                    "thread each); 0 = in this process without Dask."),
-        scheduler: Optional[str] = typer.Option(None, "--scheduler", help="Address of an "
-                                                "existing Dask scheduler (tcp://host:8786)."),
-        out: Optional[Path] = typer.Option(None, "--out", help="Per-run results, .csv or "
-                                           ".parquet."),
-        seed: int = typer.Option(0, "--seed", help="Master seed."),
+        runs: opt.at_least(1, "--runs", help="Number of seeded runs.") = 100,
+        workers: opt.Workers = 2,
+        scheduler: opt.Scheduler = None,
+        out: opt.out_file("Per-run results, .csv or .parquet.", required=False) = None,
+        seed: Annotated[int, typer.Option("--seed", help="Master seed (run i gets "
+                                          "SeedSequence(seed, spawn_key=(i,))).")] = 0,
         sets: Optional[List[str]] = typer.Option(None, "--set", help="Scenario parameter "
                                                  "KEY=VALUE (repeatable; see --list)."),
-        chunk_size: Optional[int] = typer.Option(None, "--chunk-size", help="Runs per Dask task."),
-        as_json: bool = typer.Option(False, "--json", help="Print one JSON object."),
+        chunk_size: opt.at_least(1, "--chunk-size", help="Runs per Dask task.",
+                                 optional=True) = None,
+        as_json: opt.Json = False,
         list_: bool = typer.Option(False, "--list", help="List the scenarios and parameters."),
     ):
         """Error statistics of a method over N seeded simulations against its own sigma."""
+        from selfnav import api
         from selfnav import campaigns  # noqa: F401  (registers the pairs that run the API)
         from selfnav import montecarlo as mc
+        from selfnav.io.output import check_output_file
 
         if list_:
             info = {p.name: {"unit": p.unit, "description": p.description,
@@ -60,13 +61,14 @@ def register(app: typer.Typer) -> None:
             raise SelfnavError(f"--runs must be at least 1 (got {runs})")
         if workers < 0:
             raise SelfnavError(f"--workers must be 0 (in-process) or more (got {workers})")
-        if out is not None and out.suffix.lower() not in (".csv", ".parquet", ".pq"):
-            raise SelfnavError(f"{out}: --out must end in .csv or .parquet")
+        if out is not None:
+            check_output_file(out, (".csv", ".parquet", ".pq"))
         pair = mc.get_pair(scenario)
         params = mc.resolve_params(pair, _parse_sets(sets))
+        kw = dict(seed=seed, params=params, workers=workers, scheduler=scheduler,
+                  chunk_size=chunk_size, out=out)
         if as_json:
-            res = mc.run_montecarlo(scenario, runs, seed=seed, params=params, workers=workers,
-                                    scheduler=scheduler, chunk_size=chunk_size)
+            res = api.run_montecarlo(scenario, runs, **kw)
         else:
             from rich.console import Console
             from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TextColumn,
@@ -76,13 +78,11 @@ def register(app: typer.Typer) -> None:
                           MofNCompleteColumn(), TimeElapsedColumn(), TimeRemainingColumn(),
                           console=Console(stderr=True), transient=False) as bar:
                 task = bar.add_task(f"{scenario}", total=runs)
-                res = mc.run_montecarlo(scenario, runs, seed=seed, params=params,
-                                        workers=workers, scheduler=scheduler,
-                                        chunk_size=chunk_size,
-                                        progress=lambda k: bar.advance(task, k))
+                res = api.run_montecarlo(scenario, runs, **kw,
+                                         progress=lambda k: bar.advance(task, k))
         d = res.to_dict()
         if out is not None:
-            d["out"] = str(mc.write_results(out, res))
+            d["out"] = str(out)
         if as_json:
             emit_json(d)
             return

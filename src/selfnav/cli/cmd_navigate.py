@@ -5,13 +5,19 @@ from __future__ import annotations
 import sys
 import time
 from pathlib import Path
-from typing import Optional
+from typing import Annotated, Optional
 
 import numpy as np
 import typer
 
+from selfnav.cli import options as opt
 from selfnav.cli.common import emit_json
 from selfnav.errors import SelfnavError
+
+#: Shortest IMU record, s, and the coarsest sample intervals navigate accepts / calls fine.
+MIN_IMU_S = 5.0
+MAX_IMU_DT_S = 0.2
+WARN_IMU_DT_S = 0.05
 
 
 def _vec3(text: str, name: str) -> np.ndarray:
@@ -28,9 +34,10 @@ def _magnetometer(imu, mag_path: Path | None):
     """Magnetometer columns from a separate CSV, interpolated onto the IMU times."""
     if mag_path is None:
         return imu
-    from selfnav.io.csvio import read_table
+    from selfnav.io.csvio import check_time, read_table
 
     tab = read_table(mag_path, ("t", "mx", "my", "mz"))
+    check_time(tab, min_rows=2)
     imu.mag_b = np.column_stack([np.interp(imu.t, tab["t"], tab[c]) for c in ("mx", "my", "mz")])
     return imu
 
@@ -47,65 +54,93 @@ def _odometer(imu_path: Path, odo_path: Path | None):
 def register(app: typer.Typer) -> None:
     @app.command("navigate")
     def navigate_cmd(
-        imu: Path = typer.Option(..., "--imu", help="IMU file."),
-        gnss: Optional[Path] = typer.Option(None, "--gnss", help="GNSS fixes (csv, RTKLIB .pos, "
-                                            "NMEA, PSINS avp csv); optional with --init."),
-        init: Optional[Path] = typer.Option(None, "--init", help="Start from the state of this "
-                                            "trajectory file (truth/solution CSV, RTKLIB .pos with "
-                                            "no attitude excluded, PSINS avp) at the IMU start, "
-                                            "instead of aligning from GNSS."),
-        out: Path = typer.Option(..., "--out", help="Solution CSV (written atomically)."),
-        method: str = typer.Option("ekf", help="ekf (error-state Kalman filter) or seed."),
-        map_: Optional[Path] = typer.Option(None, "--map", help="Road map (.osm/.osm.pbf)."),
-        smooth: bool = typer.Option(False, "--smooth", help="RTS smoother (post-processing)."),
-        imu_format: str = typer.Option("auto", help="csv, psins, rtklibexplorer (applies "
-                                       "upstream's -0.125 s time offset), kfgins, auto."),
-        gnss_format: str = typer.Option("auto", help="csv, pos, nmea, auto (by extension)."),
-        gnss_datum: str = typer.Option("wgs84", help="Datum of the GNSS file: wgs84, pz90.11, pz90, sk42."),
-        out_datum: str = typer.Option("wgs84", help="Datum of the solution file."),
-        grade: str = typer.Option("auto", help="IMU noise prior: auto (measured from the data), "
-                                  "navigation, tactical, industrial, consumer; where the data is "
-                                  "noisier than a preset, the measured noise is used (a warning "
-                                  "says so)."),
-        lever_arm: Optional[str] = typer.Option(None, help="IMU-to-antenna lever arm, body RFU, "
-                                                "m: x,y,z (default: estimated, and the solution "
-                                                "is the antenna's position)."),
-        imu_time_offset: Optional[float] = typer.Option(None, help="Added to the IMU time "
-                                                        "stamps after the reader's own (the "
-                                                        "rtklibexplorer format applies upstream's "
-                                                        "-0.125 s), s (default: estimated)."),
-        fix_log: Optional[Path] = typer.Option(None, "--fix-log", help="Write one row per GNSS "
-                                               "fix: t, status, reason, NIS."),
-        window_test: bool = typer.Option(True, "--window-test/--no-window-test",
-                                         help="The outlier window test (off: only the χ² gate)."),
-        nhc: bool = typer.Option(True, "--nhc/--no-nhc", help="Non-holonomic constraint (a car)."),
-        shadows: bool = typer.Option(True, "--shadows/--no-shadows", help="Shadow dead "
-                                     "reckoning against drifting GNSS."),
-        scale_factors: bool = typer.Option(False, help="Estimate scale factors (21 states)."),
-        mount_states: bool = typer.Option(False, help="Estimate the IMU's pitch and yaw to the "
-                                          "vehicle (2 states, seen by the NHC)."),
-        nhc_lever: str = typer.Option("0,0,0", help="IMU to the rear-axle centre (where the NHC "
-                                      "holds), body RFU, m: x,y,z."),
-        matcher: str = typer.Option("seed", help="--method seed identification: seed "
-                                    "(residual minimisation, seed 004 §3) or mht (road particles)."),
-        ins_datum: str = typer.Option("sk42", help="--method seed: datum of the fast loop."),
-        declination_deg: Optional[float] = typer.Option(
-            None, help="Magnetic declination, deg (default: field model at the start)."),
-        mag: Optional[Path] = typer.Option(None, "--mag", help="Magnetometer CSV t,mx,my,mz "
-                                           "(default: mx,my,mz columns of the IMU CSV)."),
-        odometer: Optional[Path] = typer.Option(None, "--odometer", help="Wheel speed CSV "
-                                                "t,speed_mps on the IMU clock (default: the "
-                                                "speed_mps column of the IMU CSV, if any)."),
-        as_json: bool = typer.Option(False, "--json", help="Print one JSON object."),
+        imu: opt.ImuFile,
+        out: opt.out_file("Solution CSV (t, lat_deg, lon_deg, h_m, velocity, attitude, σ, "
+                          "sigma_h_m, gnss status)."),
+        gnss: opt.OptionalGnssFile = None,
+        method: Annotated[str, opt.choice_option(
+            "--method", choices=("ekf", "seed"),
+            help="ekf: error-state Kalman filter; seed: seed 004's two loops (needs --map).")
+        ] = "ekf",
+        map_: opt.MapFile = None,
+        smooth: Annotated[bool, typer.Option("--smooth", help="RTS smoother "
+                                             "(post-processing).")] = False,
+        imu_format: opt.ImuFormat = "auto",
+        gnss_format: opt.GnssFormat = "auto",
+        gnss_datum: opt.GnssDatum = "wgs84",
+        out_datum: opt.OutDatum = "wgs84",
+        grade: opt.NavGrade = "auto",
+        lever_arm: Annotated[Optional[str], typer.Option(
+            metavar="X,Y,Z", help="IMU-to-antenna lever arm, body RFU, m: x,y,z (default: "
+                                  "estimated, and the solution is the antenna's position).")] = None,
+        imu_time_offset: Annotated[Optional[float], typer.Option(
+            help="Added to the IMU time stamps after the reader's own (the rtklibexplorer "
+                 "format applies upstream's -0.125 s), s (default: estimated from the "
+                 "data).")] = None,
+        init: Annotated[Optional[Path], typer.Option(
+            "--init", help="Start from the state of this trajectory file (truth/solution CSV "
+                           "with velocity and attitude, PSINS avp CSV) at the IMU start instead "
+                           "of aligning from GNSS; then --gnss is optional.")] = None,
+        fix_log: Annotated[Optional[Path], typer.Option(
+            "--fix-log", help="Write one row per GNSS fix: t, status, reason, NIS (a FILE, "
+                              "written atomically).")] = None,
+        window_test: Annotated[bool, typer.Option(
+            "--window-test/--no-window-test",
+            help="The outlier window test (off: only the χ² gate).")] = True,
+        nhc: Annotated[bool, typer.Option(
+            "--nhc/--no-nhc", help="Non-holonomic constraint (a car).")] = True,
+        shadows: Annotated[bool, typer.Option(
+            "--shadows/--no-shadows", help="Shadow dead reckoning against drifting GNSS.")] = True,
+        scale_factors: Annotated[bool, typer.Option(
+            "--scale-factors/--no-scale-factors",
+            help="Estimate scale factors (21 states).")] = False,
+        mount_states: Annotated[bool, typer.Option(
+            "--mount-states/--no-mount-states",
+            help="Estimate the IMU's pitch and yaw to the vehicle (2 states, seen by the "
+                 "NHC).")] = False,
+        nhc_lever: Annotated[str, typer.Option(
+            metavar="X,Y,Z", help="IMU to the rear-axle centre (where the NHC holds), body RFU, m: "
+                 "x,y,z.")] = "0,0,0",
+        matcher: Annotated[str, opt.choice_option(
+            "--matcher", choices=("seed", "mht"),
+            help="--method seed identification: seed (residual minimisation, seed 004 §3) or "
+                 "mht (road particles).")] = "seed",
+        ins_datum: Annotated[str, opt.choice_option(
+            "--ins-datum", choices=opt.DATUMS, normalize=opt.datum_key_lazy,
+            help="--method seed: datum of the fast loop.")] = "sk42",
+        declination_deg: Annotated[Optional[float], typer.Option(
+            min=-180.0, max=180.0,
+            help="Magnetic declination, deg (default: IGRF at the start).")] = None,
+        mag: Annotated[Optional[Path], typer.Option(
+            "--mag", help="Magnetometer CSV t,mx,my,mz (default: mx,my,mz columns of the IMU "
+                          "CSV).")] = None,
+        odometer: Annotated[Optional[Path], typer.Option(
+            "--odometer", help="Wheel speed CSV t,speed_mps on the IMU clock (default: the "
+                               "speed_mps column of the IMU CSV, if any).")] = None,
+        as_json: opt.Json = False,
     ):
         """Navigate with an IMU and GNSS; survives unflagged GNSS outliers (window test)."""
         from selfnav import api
+        from selfnav.io.imu import check_imu_rate
+        from selfnav.io.output import check_output_file
 
-        data = _magnetometer(api.read_imu(imu, imu_format), mag)
+        check_output_file(out)
+        if fix_log is not None:
+            check_output_file(fix_log)
         if gnss is None and init is None:
             raise SelfnavError("navigate needs --gnss FILE (or an initial state: --init FILE)")
+        lever = None if lever_arm is None else _vec3(lever_arm, "--lever-arm")
+        nhc_arm = _vec3(nhc_lever, "--nhc-lever")
+        data = _magnetometer(api.read_imu(imu, imu_format), mag)
+        check_imu_rate(data, "navigate", min_duration_s=MIN_IMU_S, max_dt_s=MAX_IMU_DT_S,
+                       warn_dt_s=WARN_IMU_DT_S)
         g = api.read_gnss(gnss, gnss_format, gnss_datum) if gnss is not None else None
-        graph = api.read_roads(map_) if map_ is not None else None
+        graph = None
+        if map_ is not None:
+            if g is None:
+                graph = api.read_roads(map_)
+            else:
+                graph = api.check_map_covers(map_, g.lat, g.lon, what="GNSS fixes")
         odo = _odometer(imu, odometer)
         t0 = time.perf_counter()
         progress = bar = None
@@ -118,14 +153,20 @@ def register(app: typer.Typer) -> None:
             progress = lambda x: bar.update(task, completed=x)  # noqa: E731
         try:
             sol = api.navigate(data, g, graph, method=method, smooth=smooth, grade=grade,
-                               lever_arm_m=None if lever_arm is None else _vec3(lever_arm, "--lever-arm"),
+                               lever_arm_m=lever, nhc_lever_m=nhc_arm,
                                imu_time_offset_s=imu_time_offset,
-                               nhc_lever_m=_vec3(nhc_lever, "--nhc-lever"),
                                window_test=window_test, nhc=nhc, shadows=shadows,
                                mount_states=mount_states, scale_factors=scale_factors or None,
                                matcher=matcher, ins_datum=ins_datum,
                                declination_deg=declination_deg, init=init, progress=progress,
                                odometer=odo)
+        except np.linalg.LinAlgError as e:   # a safety net: one line, not a traceback
+            from selfnav.io.imu import MAX_BRIDGE_SAMPLES, imu_gaps
+
+            gaps = imu_gaps(data, MAX_BRIDGE_SAMPLES + 1)
+            cause = (f"; the likely cause is {max(gaps, key=lambda g: g.duration).describe()}"
+                     if gaps else "")
+            raise SelfnavError(f"{imu}: the filter failed numerically ({e}){cause}") from None
         finally:
             if bar is not None:
                 bar.stop()

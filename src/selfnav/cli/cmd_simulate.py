@@ -2,11 +2,11 @@
 from __future__ import annotations
 
 import sys
-from pathlib import Path
-from typing import Optional
+from typing import Annotated
 
 import typer
 
+from selfnav.cli import options as opt
 from selfnav.cli.common import emit_json
 
 STAGES = ("trajectory", "inverse strapdown", "sensor errors", "magnetometer", "GNSS", "writing")
@@ -15,19 +15,23 @@ STAGES = ("trajectory", "inverse strapdown", "sensor errors", "magnetometer", "G
 def register(app: typer.Typer) -> None:
     @app.command("simulate")
     def simulate_cmd(
-        scenario: str = typer.Argument(..., help="static, multiposition, ship, aircraft, car, "
-                                       "or a TOML scenario file."),
-        out: Path = typer.Option(..., "--out", help="Output folder (created)."),
-        seed: int = typer.Option(0, help="Random seed: the same seed gives the same files."),
-        grade: Optional[str] = typer.Option(None, help="IMU grade: navigation, tactical, "
-                                            "industrial, consumer or perfect."),
-        duration: Optional[float] = typer.Option(None, help="Length, s (scenario default)."),
-        dt: Optional[float] = typer.Option(None, help="IMU sample interval, s (default 0.01)."),
-        as_json: bool = typer.Option(False, "--json", help="Print one JSON object."),
+        scenario: Annotated[str, typer.Argument(
+            metavar="SCENARIO", help="static, multiposition, ship, aircraft, car, or a TOML scenario file.")],
+        out: opt.out_folder("Folder for imu.csv, gnss.csv, gnss_errors.csv, truth.csv, "
+                            "mag.csv and the map (car)."),
+        seed: opt.Seed = 0,
+        grade: opt.SimGrade = None,
+        duration: opt.positive("--duration", help="Length, s (default: the scenario's).",
+                               optional=True) = None,
+        dt: opt.positive("--dt", help="IMU sample interval, s (default 0.01; at most 0.1 for a "
+                                      "moving vehicle).", optional=True) = None,
+        as_json: opt.Json = False,
     ):
         """Simulate a scenario and write imu.csv, gnss.csv, truth.csv, mag.csv and the map."""
-        from selfnav.simulate.scenarios import simulate, write_simulation
+        from selfnav import api
+        from selfnav.io.output import check_output_folder
 
+        check_output_folder(out)
         if as_json or not sys.stderr.isatty():
             stage = lambda name: None  # noqa: E731
             ctx = None
@@ -42,10 +46,8 @@ def register(app: typer.Typer) -> None:
             def stage(name):
                 ctx.update(task, advance=1, description=name)
         try:
-            sim = simulate(scenario, seed=seed, grade=grade, duration=duration, dt=dt,
-                           progress=stage)
-            stage("writing")
-            paths = write_simulation(sim, out)
+            sim, paths = api.simulate_files(scenario, out, seed=seed, grade=grade,
+                                            duration=duration, dt=dt, progress=stage)
         finally:
             if ctx is not None:
                 ctx.stop()

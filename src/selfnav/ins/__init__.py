@@ -10,8 +10,10 @@ imports only those to its left (and ``config``).
 """
 from selfnav.ins.config import FilterConfig
 from selfnav.ins.ekf import InsGnssFilter
-from selfnav.ins.navigator import (FilterResult, StreamingNavigator, fixes_sigma,
+from selfnav.ins.navigator import (FilterResult, StreamingNavigator, concatenate_results,
+                                  fixes_sigma,
                                   init_from_gnss, output_trajectory, run_filter)
 
 __all__ = ["FilterConfig", "InsGnssFilter", "FilterResult", "StreamingNavigator",
-           "init_from_gnss", "run_filter", "output_trajectory", "fixes_sigma"]
+           "init_from_gnss", "run_filter", "output_trajectory", "fixes_sigma",
+           "concatenate_results"]

@@ -49,10 +49,20 @@ STILL_SPEED = 0.3
 WHITE_TAU = (0.3, 3.0)
 #: the measured noise wins over the prior when it is this many times larger (and is reported)
 NOISIER_THAN_PRIOR = 2.0
+#: median of χ² with 2 degrees of freedom (2 ln 2)
+CHI2_2_MEDIAN = 1.3862943611198906
+#: seconds of still data after which the measured white noise replaces the prior both ways
+WHITE_TRUST_S = 20.0
 #: the GNSS course is used above this speed, m/s
 COURSE_MIN_SPEED = 3.0
 #: time offsets searched by the pre-pass, s
 OFFSET_RANGE = 0.6
+#: a course from position differences is used only below this speed, m/s, and where it agrees
+#: with its neighbours' velocity within ``COURSE_MAX_ACCEL`` m/s² (unflagged outliers)
+COURSE_MAX_SPEED = 70.0
+COURSE_MAX_ACCEL = 15.0
+#: course residuals beyond this count as this (a truncated misfit: outliers cannot pull), rad
+COURSE_TRUNCATE = 20.0 * DEG
 
 
 @dataclass
@@ -93,17 +103,22 @@ def still_mask(imu: ImuData, gnss: GnssData | None = None, *, window_s: float = 
     out[: nb * m] = np.repeat(quiet, m)
     keep = np.zeros(n, bool)
     f_win = imu.f_ib_b[: nb * m].reshape(nb, m, 3).mean(axis=1)
+    blk = max(1, int(round(STILL_MIN_S / window_s)))      # windows per block
     for a, b in _runs(out):
-        if (b - a) * imu.dt < STILL_MIN_S:
-            continue
-        if gnss is not None and not _gnss_stopped(gnss, imu.t[a], imu.t[b - 1]):
-            continue
-        # at rest the window means do not move: no braking, no pulling away, no creeping turn
+        # judge each run block by block: a stop ends with the car pulling away, and the
+        # blocks before that are still
         ka, kb = a // m, b // m
-        if (np.max(np.linalg.norm(f_win[ka:kb] - f_win[ka:kb].mean(axis=0), axis=1)) > 0.1
-                or np.max(np.linalg.norm(w[ka:kb] - w[ka:kb].mean(axis=0), axis=1)) > 0.5 * DEG):
-            continue
-        keep[a:b] = True
+        for j0 in range(ka, kb - blk + 1, blk):
+            j1 = j0 + blk if kb - (j0 + blk) >= blk else kb
+            i0, i1 = j0 * m, min(j1 * m, n)
+            if gnss is not None and not _gnss_stopped(gnss, imu.t[i0], imu.t[i1 - 1]):
+                continue
+            # at rest the window means do not move: no braking, no pulling away, no turn
+            if (np.max(np.linalg.norm(f_win[j0:j1] - f_win[j0:j1].mean(axis=0), axis=1)) > 0.1
+                    or np.max(np.linalg.norm(w[j0:j1] - w[j0:j1].mean(axis=0), axis=1))
+                    > 0.5 * DEG):
+                continue
+            keep[i0:i1] = True
     return keep
 
 
@@ -185,8 +200,13 @@ def estimate_time_offset(imu: ImuData, gnss: GnssData, *, search_s: float = OFFS
         vn = (p[2:, 1] - p[:-2, 1]) / dtk
         t = gnss.t[1:-1]
     speed = np.hypot(ve, vn)
+    # a velocity is plausible when it is a car's and agrees with both neighbours (an
+    # unflagged outlier differenced into a velocity is neither)
+    dv = np.hypot(np.diff(ve), np.diff(vn)) / np.maximum(np.diff(t), 1e-3)
+    smooth = np.r_[dv, np.inf] < COURSE_MAX_ACCEL
+    smooth &= np.r_[np.inf, dv] < COURSE_MAX_ACCEL
     inside = (t > imu.t[0] + search_s + 1.0) & (t < imu.t[-1] - search_s - 1.0)
-    m = (speed > COURSE_MIN_SPEED) & inside
+    m = (speed > COURSE_MIN_SPEED) & (speed < COURSE_MAX_SPEED) & smooth & inside
     if m.sum() < 20:
         return None
     u = imu.f_ib_b.mean(axis=0)
@@ -213,7 +233,7 @@ def estimate_time_offset(imu: ImuData, gnss: GnssData, *, search_s: float = OFFS
         y_c = y - np.bincount(seg, y, nseg)[seg] / count[seg]
         b = float(t_c @ y_c) / max(float(t_c @ t_c), 1e-12)
         r = np.angle(np.exp(1j * (y_c - b * t_c)))
-        return float(np.mean(r * r))
+        return float(np.mean(np.minimum(r * r, COURSE_TRUNCATE**2)))
 
     taus = np.arange(-search_s, search_s + 1e-9, 0.005)
     f = np.array([misfit(x) for x in taus])
@@ -294,10 +314,16 @@ def combine(prior: ImuNoise, measured: MeasuredNoise) -> tuple[ImuNoise, list]:
     notes = []
     if measured.arw is not None and measured.arw > NOISIER_THAN_PRIOR * prior.arw:
         notes.append(f"gyro noise {measured.arw / (DEG / 60):.3g} °/√h vs {prior.arw / (DEG / 60):.3g}")
-        out.arw = measured.arw
     if measured.vrw is not None and measured.vrw > NOISIER_THAN_PRIOR * prior.vrw:
         notes.append(f"accelerometer noise {measured.vrw * 60:.3g} m/s/√h vs {prior.vrw * 60:.3g}")
+    # white noise is what a still segment measures well: it replaces the prior both ways
+    # (after WHITE_TRUST_S of still data); the bias terms it cannot measure only go up
+    if measured.still_s >= WHITE_TRUST_S:
+        out.arw = measured.arw
         out.vrw = measured.vrw
+    else:
+        out.arw = max(prior.arw, measured.arw or 0.0)
+        out.vrw = max(prior.vrw, measured.vrw or 0.0)
     if measured.gyro_bias is not None:
         b = float(np.max(np.abs(measured.gyro_bias)))
         if b > NOISIER_THAN_PRIOR * max(prior.gyro_bias_sigma, OMEGA_EARTH):
@@ -314,42 +340,57 @@ def combine(prior: ImuNoise, measured: MeasuredNoise) -> tuple[ImuNoise, list]:
 
 
 class NoiseAdapter:
-    """The safety net when the noise model is still too optimistic (module docstring, item 3).
+    """The noise the data shows, online (module docstring, item 3).
 
-    Two corrections, both driven only by trusted fixes and both bounded:
+    Driven only by trusted fixes, every step bounded:
 
     * ``λ`` (the filter's process-noise scale) rises when the main filter's normalised
       innovations stay above their dimension (the INS is more uncertain than it says) and
-      decays back to 1 otherwise — never below: a preset or a measurement is not lowered by a
-      few quiet minutes, which would leave the next outage overconfident;
+      decays back to 1 otherwise — never below: a few quiet minutes must not leave the next
+      outage overconfident;
     * the shadows' σ inflation (their χ² test of fixes) follows the shadows' own
-      dead-reckoning errors over 5–90 s against their σ, between ``sigma_scale`` and
-      ``shadow_scale_max``: a shadow that is honestly uncertain must not reject clean fixes.
+      dead-reckoning errors over 5–90 s against their σ (:attr:`dr_ratio`), between
+      ``sigma_scale`` and ``shadow_scale_max``: an honestly uncertain shadow must not reject
+      clean fixes.
+
+    (Driving the bias-noise scale ``λ_b`` from the same shadow errors was tried and left
+    out: the shadows' errors lag the scale they were branched with, and the loop wandered to
+    its bounds on simulated drives whose matched noise needed no change.)
 
     Parameters
     ----------
     hi : largest ``λ``
     up_step : largest factor one fix may raise ``λ`` by
     decay : factor per trusted fix back towards 1
-    memory : fixes (or shadow tests) over which the normalised errors are averaged
-    trigger : mean NIS per dimension above which ``λ`` rises
+    memory : fixes over which the normalised innovations are averaged (three times as many
+        shadow tests)
+    trigger : mean normalised innovation per dimension above which ``λ`` rises
     """
 
     def __init__(self, sigma_scale=2.0, shadow_scale_max=10.0, hi=1e4, up_step=1.1,
                  decay=0.995, memory=40, trigger=2.0):
         self.hi, self.up_step, self.decay, self.trigger = hi, up_step, decay, trigger
         self.alpha = 1.0 / memory
+        self.alpha_dr = 1.0 / (3 * memory)
         self.base_scale, self.scale_max = sigma_scale, shadow_scale_max
         self.fix_ratio = 1.0     # running mean of NIS/dof of trusted fixes
-        self.dr_ratio = 1.0      # running mean of shadow χ²/dof at trusted fixes
+        self._above = 0.5        # running share of shadow χ² beyond the χ²₂ median
+        self.dr_samples = 0
         self.updates = 0
         self.raised = False
 
     @property
+    def dr_ratio(self) -> float:
+        """The shadows' actual/predicted error variance, from the share of fixes beyond the
+        median of χ²₂: for errors κ times the predicted variance, P(χ² > 1.386) = ½^(1/κ), so
+        κ̂ = ln ½ / ln p̂ (robust: the heavy tails of dead reckoning in turns do not decide)."""
+        p = min(max(self._above, 0.02), 0.98)
+        return math.log(0.5) / math.log(p)
+
+    @property
     def shadow_scale(self) -> float:
         """σ inflation of the shadows' fix test."""
-        return float(np.clip(self.base_scale * np.sqrt(max(self.dr_ratio, 1.0)),
-                             self.base_scale, self.scale_max))
+        return min(self.base_scale * math.sqrt(max(self.dr_ratio, 1.0)), self.scale_max)
 
     def on_fix(self, flt, nis_value, dof):
         """A trusted fix with normalised innovation ``nis_value`` of ``dof`` dimensions."""
@@ -359,16 +400,17 @@ class NoiseAdapter:
             k = min(self.up_step, (self.fix_ratio / self.trigger) ** 0.25)
         else:
             k = self.decay
-        new = float(np.clip(flt.q_scale * k, 1.0, self.hi))
+        new = min(max(flt.q_scale * k, 1.0), self.hi)
         if new != flt.q_scale:
             flt.q_scale = new
             self.updates += 1
             self.raised = self.raised or new > 3.0
 
     def on_shadow(self, chi2_value, dof):
-        """A trusted fix against a mature shadow (its dead-reckoning error over 5–90 s)."""
-        x = min(chi2_value / dof, 25.0)
-        self.dr_ratio += self.alpha * (x - self.dr_ratio)
+        """A trusted fix against a mature shadow (its dead-reckoning error over 5–90 s), 2 dof:
+        updates the shadows' variance ratio (:attr:`dr_ratio`)."""
+        self._above += self.alpha_dr * (float(chi2_value > CHI2_2_MEDIAN) - self._above)
+        self.dr_samples += 1
 
 
 def calibrated_config(cfg: FilterConfig, imu: ImuData, gnss: GnssData | None = None):

@@ -59,7 +59,7 @@ import numpy as np
 
 from selfnav import attitude as att
 from selfnav.attitude import rotvec_to_dcm3, skew3
-from selfnav.earth import OMEGA_EARTH, WGS84, enu_offset, normal_gravity, radii
+from selfnav.earth import OMEGA_EARTH, WGS84, enu_offset, radii
 from selfnav.ins.config import CHI2_1_999, CHI2_2_999, CHI2_3_999, FilterConfig
 from selfnav.ins.strapdown import Strapdown
 from selfnav.types import Trajectory
@@ -147,6 +147,166 @@ def _nis(P, H, R, r):  # pragma: no cover - compiled
     return float(r @ np.linalg.solve(S, r))
 
 
+@numba.njit(cache=True)
+def _skew_into(M, r0, c0, x, y, z, k):  # pragma: no cover - compiled
+    """``M[r0:r0+3, c0:c0+3] = k [v×]``."""
+    M[r0, c0] = 0.0
+    M[r0, c0 + 1] = -k * z
+    M[r0, c0 + 2] = k * y
+    M[r0 + 1, c0] = k * z
+    M[r0 + 1, c0 + 1] = 0.0
+    M[r0 + 1, c0 + 2] = -k * x
+    M[r0 + 2, c0] = -k * y
+    M[r0 + 2, c0 + 1] = k * x
+    M[r0 + 2, c0 + 2] = 0.0
+
+
+@numba.njit(cache=True)
+def _fill_F(F, s, f_n, w_b, f_b, a, e2, g, omega, inv_tau_g, inv_tau_a, isg, isa):  # pragma: no cover
+    """The error dynamics matrix (module docstring) at strapdown state ``s`` (lat, lon, h,
+    v(3), C_bn row-major(9)); ``isg``/``isa`` the first index of the scale-factor blocks or -1."""
+    F[:, :] = 0.0
+    lat, h = s[0], s[2]
+    ve, vn = s[3], s[4]
+    sl = np.sin(lat)
+    w = np.sqrt(1.0 - e2 * sl * sl)
+    rn = a / w + h
+    rm = a * (1.0 - e2) / (w * w * w) + h
+    cl = np.cos(lat)
+    wie_n, wie_u = omega * cl, omega * sl
+    wen_e, wen_n, wen_u = -vn / rm, ve / rn, ve * np.tan(lat) / rn
+    F[0, 3] = 1.0
+    F[1, 4] = 1.0
+    F[2, 5] = 1.0
+    _skew_into(F, 3, 6, f_n[0], f_n[1], f_n[2], 1.0)
+    _skew_into(F, 3, 3, wen_e, 2.0 * wie_n + wen_n, 2.0 * wie_u + wen_u, -1.0)
+    _skew_into(F, 6, 6, wen_e, wie_n + wen_n, wie_u + wen_u, -1.0)
+    for i in range(3):
+        for j in range(3):
+            c = s[6 + 3 * i + j]          # C_bn[i, j]
+            F[3 + i, 12 + j] = -c
+            F[6 + i, 9 + j] = c
+            if isg >= 0:
+                F[6 + i, isg + j] = c * w_b[j]
+                F[3 + i, isa + j] = -c * f_b[j]
+        F[9 + i, 9 + i] = -inv_tau_g
+        F[12 + i, 12 + i] = -inv_tau_a
+    F[5, 2] = 2.0 * g / np.sqrt(rm * rn)
+
+
+@numba.njit(cache=True)
+def _propagate(P, Phi_acc, F, q, h, nsub):  # pragma: no cover - compiled
+    """``Φ = I + F h + ½ (F h)²`` and ``nsub`` steps of ``P ← Φ P Φᵀ + diag(q)``."""
+    n = F.shape[0]
+    Fh = F * h
+    Phi = Fh + 0.5 * (Fh @ Fh)
+    for i in range(n):
+        Phi[i, i] += 1.0
+    _propagate_cov(P, Phi, q, nsub, Phi_acc)
+
+
+@numba.njit(cache=True)
+def _correct_nav(s, dx, a, e2, renorm):  # pragma: no cover - compiled
+    """Remove the navigation part of an error estimate from the strapdown state ``s`` in
+    place: position (ENU m → lat, lon, h), velocity, attitude ``C̃_b^n ← exp([ψ]) C̃_b^n``."""
+    lat, h = s[0], s[2]
+    sl = np.sin(lat)
+    w = np.sqrt(1.0 - e2 * sl * sl)
+    rn = a / w + h
+    rm = a * (1.0 - e2) / (w * w * w) + h
+    s[0] = lat - dx[1] / rm
+    s[1] = s[1] - dx[0] / (rn * np.cos(lat))
+    s[2] = h - dx[2]
+    s[3] -= dx[3]
+    s[4] -= dx[4]
+    s[5] -= dx[5]
+    x, y, z = dx[6], dx[7], dx[8]
+    th2 = x * x + y * y + z * z
+    if th2 < 1e-12:
+        a1, b1 = 1.0, 0.5
+    else:
+        th = np.sqrt(th2)
+        a1, b1 = np.sin(th) / th, (1.0 - np.cos(th)) / th2
+    K = np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
+    Rm = np.eye(3) + a1 * K + b1 * (K @ K)
+    C = np.empty((3, 3))
+    for i in range(3):
+        for j in range(3):
+            C[i, j] = s[6 + 3 * i + j]
+    C = Rm @ C
+    if renorm:   # rotations keep it orthonormal; clean the rounding now and then
+        U, _, Vt = np.linalg.svd(C)
+        C = U @ Vt
+    for i in range(3):
+        for j in range(3):
+            s[6 + 3 * i + j] = C[i, j]
+
+
+@numba.njit(cache=True)
+def _nhc_rows(s, w_b, lever, mu, mu_col, nx):  # pragma: no cover - compiled
+    """Residual and Jacobian of the non-holonomic constraint (:meth:`InsGnssFilter.update_nhc`)
+    at strapdown state ``s``; ``mu_col`` the first column of the mounting block or -1."""
+    C_nb = np.empty((3, 3))
+    for i in range(3):
+        for j in range(3):
+            C_nb[i, j] = s[6 + 3 * j + i]          # transpose of C_bn
+    v = s[3:6]
+    vv = C_nb @ v
+    vv[0] += w_b[1] * lever[2] - w_b[2] * lever[1]
+    vv[1] += w_b[2] * lever[0] - w_b[0] * lever[2]
+    vv[2] += w_b[0] * lever[1] - w_b[1] * lever[0]
+    C_vn = C_nb
+    if mu_col >= 0 or mu[0] != 0.0 or mu[1] != 0.0:
+        x, z = mu[0], mu[1]
+        th2 = x * x + z * z
+        if th2 < 1e-12:
+            a1, b1 = 1.0, 0.5
+        else:
+            th = np.sqrt(th2)
+            a1, b1 = np.sin(th) / th, (1.0 - np.cos(th)) / th2
+        K = np.array([[0.0, -z, 0.0], [z, 0.0, -x], [0.0, x, 0.0]])
+        C_vb = np.eye(3) + a1 * K + b1 * (K @ K)
+        C_vn = C_vb @ C_nb
+        vv = C_vb @ vv
+    H = np.zeros((2, nx))
+    r = np.empty(2)
+    Sv = np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+    for a, row in enumerate((0, 2)):
+        r[a] = vv[row]
+        for j in range(3):
+            H[a, 3 + j] = C_vn[row, j]
+        hp = -(C_vn[row] @ Sv)
+        for j in range(3):
+            H[a, 6 + j] = hp[j]
+    if mu_col >= 0:
+        # -[v_v×] restricted to rows (x, z) and columns (x, z)
+        H[0, mu_col] = 0.0
+        H[0, mu_col + 1] = -vv[1]
+        H[1, mu_col] = vv[1]
+        H[1, mu_col + 1] = 0.0
+    return r, H
+
+
+@numba.njit(cache=True)
+def _compensate(dtheta, dv, dt, bg, ba, sg, sa):  # pragma: no cover - compiled
+    """Bias- and scale-corrected increments ``(Δθ − b_g Δt)/(1 + s_g)`` (same for Δv) and
+    their sums."""
+    n = dtheta.shape[0]
+    dth = np.empty((n, 3))
+    dvb = np.empty((n, 3))
+    sth = np.zeros(3)
+    sdv = np.zeros(3)
+    for k in range(n):
+        for j in range(3):
+            a = (dtheta[k, j] - bg[j] * dt[k]) / (1.0 + sg[j])
+            b = (dv[k, j] - ba[j] * dt[k]) / (1.0 + sa[j])
+            dth[k, j] = a
+            dvb[k, j] = b
+            sth[j] += a
+            sdv[j] += b
+    return dth, dvb, sth, sdv
+
+
 def nis(P, H, R, r) -> float:
     """Normalised innovation squared of residual ``r`` (``H P Hᵀ + R``)."""
     return float(_nis(P, np.ascontiguousarray(H), np.ascontiguousarray(R), np.asarray(r, float)))
@@ -162,6 +322,9 @@ class InsGnssFilter:
     ----------
     q_scale : float
         ``λ``, the scale of the process noise (adapted by :mod:`selfnav.ins.calibrate`).
+    bias_scale : float
+        ``λ_b``, a further scale of the slowly varying part (bias instability, lever arm,
+        time offset and mounting random walks), which a still segment cannot measure.
     bg, ba, sg, sa, mu, lever_b, time_offset, odo_scale :
         The estimated sensor errors, mounting angles, lever arm (body RFU, m), residual
         IMU time offset (s, added to the IMU stamps) and odometer scale-factor error.
@@ -183,6 +346,7 @@ class InsGnssFilter:
         self.time_offset = 0.0
         self.odo_scale = 0.0
         self.q_scale = 1.0
+        self.bias_scale = 1.0
         imu = cfg.imu
         P = np.zeros((self.nx, self.nx))
         P[IR, IR] = np.eye(3) * cfg.init.pos_sigma**2
@@ -207,9 +371,14 @@ class InsGnssFilter:
         self._f_b = np.array([0.0, 0.0, 9.8])
         self._Phi_acc = np.eye(self.nx)  # transition since the last stored epoch (smoother)
         self._n_corr = 0
-        self._I = np.eye(self.nx)
-        self._I3 = np.eye(3)
-        self._q0 = self._q_density()
+        self._Fbuf = np.zeros((self.nx, self.nx))
+        self._nhc_lever = np.asarray(cfg.vehicle.nhc_lever_b, dtype=float).reshape(3).copy()
+        self._grav = (self.ins.ellipsoid.k_somigliana, self.ins.ellipsoid.m)
+        q = self._q_density()
+        self._q_white = np.zeros(self.nx)
+        self._q_white[IV] = q[IV]
+        self._q_white[IP] = q[IP]
+        self._q_slow = q - self._q_white
 
     # ------------------------------------------------------------------ model
     def _q_density(self):
@@ -232,72 +401,63 @@ class InsGnssFilter:
         return q
 
     def _F(self):
+        """The error dynamics matrix at the current state (:func:`_fill_F`)."""
         cfg, lay = self.cfg, self.layout
-        lat, h = self.ins.lat, self.ins.h
-        v = self.ins.velocity_n
-        rm, rn = radii(lat, h)
-        w_ie = np.array([0.0, OMEGA_EARTH * math.cos(lat), OMEGA_EARTH * math.sin(lat)])
-        w_en = np.array([-v[1] / rm, v[0] / rn, v[0] * math.tan(lat) / rn])
-        C_bn = self.ins.C_nb.T
-        F = np.zeros((self.nx, self.nx))
-        F[0, 3] = F[1, 4] = F[2, 5] = 1.0
-        F[IV, IP] = skew3(self._f_n)
-        F[IV, IV] = -skew3(2 * w_ie + w_en)
-        F[IV, IBA] = -C_bn
-        g = float(normal_gravity(lat, h))
-        F[5, 2] = 2.0 * g / math.sqrt(rm * rn)
-        F[IP, IP] = -skew3(w_ie + w_en)
-        F[IP, IBG] = C_bn
-        if np.isfinite(cfg.imu.gyro_bias_tau):
-            F[IBG, IBG] = -self._I3 / cfg.imu.gyro_bias_tau
-        if np.isfinite(cfg.imu.accel_bias_tau):
-            F[IBA, IBA] = -self._I3 / cfg.imu.accel_bias_tau
-        if lay.sg is not None:
-            # corrected rate (ω̃ − b)/(1 + s): its error is −(δb + diag(ω) δs)
-            F[IP, lay.sg] = C_bn * self._w_b[None, :]
-            F[IV, lay.sa] = -C_bn * self._f_b[None, :]
-        return F
+        s = self.ins.state_array()
+        g = self._gravity(s[0], s[2])
+        imu = cfg.imu
+        _fill_F(self._Fbuf, s, self._f_n, self._w_b, self._f_b, self.ins.ellipsoid.a,
+                self.ins.ellipsoid.e2, g, OMEGA_EARTH,
+                0.0 if not np.isfinite(imu.gyro_bias_tau) else 1.0 / imu.gyro_bias_tau,
+                0.0 if not np.isfinite(imu.accel_bias_tau) else 1.0 / imu.accel_bias_tau,
+                -1 if lay.sg is None else lay.sg.start, -1 if lay.sa is None else lay.sa.start)
+        return self._Fbuf
+
+    def _gravity(self, lat, h):
+        """Normal gravity (scalar fast path of :func:`selfnav.earth.normal_gravity`,
+        Somigliana with the TR8350.2 height term)."""
+        e, s2 = self.ins.ellipsoid, math.sin(lat) ** 2
+        k, m = self._grav
+        g0 = e.gamma_e * (1.0 + k * s2) / math.sqrt(1.0 - e.e2 * s2)
+        return g0 * (1.0 - 2.0 / e.a * (1.0 + e.f + m - 2.0 * e.f * s2) * h + 3.0 / e.a**2 * h * h)
 
     # ------------------------------------------------------------------ propagation
-    def predict(self, t, dtheta, dv):
+    def predict(self, t, dtheta, dv, dt=None):
         """Mechanize a block of IMU increments (bias-corrected) and propagate the covariance.
 
-        Returns the block's :class:`~selfnav.types.Trajectory`.
+        ``dt`` are the interval lengths (default: from ``t`` and the state time).
         """
         t = np.asarray(t, dtype=float)
         if len(t) == 0:
             return None
-        dt = np.diff(np.concatenate([[self.ins.t], t]))
-        dth = (dtheta - self.bg * dt[:, None]) / (1.0 + self.sg)
-        dvb = (dv - self.ba * dt[:, None]) / (1.0 + self.sa)
-        tr = self.ins.run(t, dth, dvb)
-        T = float(t[-1] - (t[0] - dt[0]))
-        f_b = dvb.sum(0) / T
+        if dt is None:
+            dt = np.diff(np.concatenate([[self.ins.t], t]))
+        dt = np.ascontiguousarray(dt, dtype=float)
+        dth, dvb, sth, sdv = _compensate(np.ascontiguousarray(dtheta, dtype=float),
+                                         np.ascontiguousarray(dv, dtype=float), dt, self.bg,
+                                         self.ba, self.sg, self.sa)
+        C_nb = self.ins.advance(t, dt, dth, dvb)
+        T = float(dt.sum())
+        f_b = sdv / T
         self._f_b = f_b
-        self._f_n = tr.C_nb[-1].T @ f_b
-        self._w_b = dth.sum(0) / T
+        self._f_n = C_nb.T @ f_b
+        self._w_b = sth / T
         self.propagate_covariance(T)
-        return tr
+        return C_nb
 
     def propagate_covariance(self, T):
         """Covariance over ``T`` seconds at the current state (sub-steps of ``cov_step``)."""
         nsub = max(1, int(math.ceil(T / self.cfg.cov_step)))
-        F = self._F()
         h = T / nsub
-        Phi = self._I + F * h + 0.5 * (F @ F) * (h * h)
-        _propagate_cov(self.P, Phi, self._q0 * (self.q_scale * h), nsub, self._Phi_acc)
+        q = (self._q_white + self.bias_scale * self._q_slow) * (self.q_scale * h)
+        _propagate(self.P, self._Phi_acc, self._F(), q, h, nsub)
 
     # ------------------------------------------------------------------ updates
     def _correct(self, dx):
-        ins, lay = self.ins, self.layout
-        lat, h = ins.lat, ins.h
-        rm, rn = radii(lat, h)
-        C_bn = rotvec_to_dcm3(dx[IP]) @ ins.C_nb.T
+        lay = self.layout
         self._n_corr += 1
-        if self._n_corr % 100 == 0:  # rotations keep it orthonormal; clean rounding now and then
-            C_bn = att.orthonormalize(C_bn)
-        ins.set_state(lat=lat - dx[1] / rm, lon=ins.lon - dx[0] / (rn * math.cos(lat)),
-                      h=h - dx[2], velocity_n=ins.velocity_n - dx[IV], C_nb=C_bn.T, check=False)
+        _correct_nav(self.ins.state_array(), dx, self.ins.ellipsoid.a, self.ins.ellipsoid.e2,
+                     self._n_corr % 100 == 0)
         self.bg -= dx[IBG]  # δb = estimated − true
         self.ba -= dx[IBA]
         if lay.sg is not None:
@@ -308,9 +468,9 @@ class InsGnssFilter:
         if lay.lever is not None:
             self.lever_b -= dx[lay.lever]
         if lay.toff is not None:
-            self.time_offset -= float(dx[lay.toff][0])
+            self.time_offset -= float(dx[lay.toff.start])
         if lay.odo is not None:
-            self.odo_scale -= float(dx[lay.odo][0])
+            self.odo_scale -= float(dx[lay.odo.start])
 
     def kalman(self, r, H, R):
         """Apply a measurement (residual ``h(x̃) − z``, Jacobian ``H``, noise ``R``) and correct
@@ -380,18 +540,12 @@ class InsGnssFilter:
             v_v = exp([μ×]) (C_nb v^n + ω_b × l),    z = (v_v,R, v_v,U) = 0
             ∂v_v/∂δv = C_vb C_nb,  ∂v_v/∂ψ = −C_vb C_nb [v^n×],  ∂v_v/∂δμ = −[v_v×] (cols x, z)
         """
-        v = self.ins.velocity_n
-        vv, C_vn = self.vehicle_velocity()
         veh = self.cfg.vehicle
-        mu_on = self.layout.mu is not None
-        H = np.zeros((2, self.nx))
-        H[:, IV] = C_vn[[0, 2]]
-        H[:, IP] = -C_vn[[0, 2]] @ skew3(v)
-        if mu_on:
-            H[:, self.layout.mu] = -skew3(vv)[[0, 2]][:, [0, 2]]
+        mu_col = -1 if self.layout.mu is None else self.layout.mu.start
+        r, H = _nhc_rows(self.ins.state_array(), self._w_b, self._nhc_lever, self.mu, mu_col,
+                         self.nx)
         s_up = veh.nhc_sigma if veh.nhc_sigma_up is None else veh.nhc_sigma_up
-        R = np.diag([veh.nhc_sigma**2, s_up**2])
-        return self.kalman(vv[[0, 2]], H, R)
+        return self.kalman(r, H, np.diag([veh.nhc_sigma**2, s_up**2]))
 
     def vehicle_velocity(self):
         """Velocity at the NHC point (rear axle) in the vehicle frame (NHC docstring) and
@@ -399,7 +553,7 @@ class InsGnssFilter:
         C_nb = self.ins.C_nb
         vv = C_nb @ self.ins.velocity_n
         C_vn = C_nb
-        lever = self.cfg.vehicle.nhc_lever_b
+        lever = self._nhc_lever
         if lever[0] or lever[1] or lever[2]:
             vv = vv + np.cross(self._w_b, lever)
         if self.layout.mu is not None or self.mu[0] or self.mu[1]:
@@ -522,8 +676,8 @@ def unpack_states(t, states, Ps):
     C = states[:, PACK["C"]].reshape(-1, 3, 3)
     traj = Trajectory(t, states[:, 0], states[:, 1], states[:, 2], states[:, PACK["vel"]], C,
                       source="selfnav ekf")
-    sig = np.sqrt(np.maximum(np.diagonal(Ps, axis1=1, axis2=2), 0.0))
-    return traj, sig
+    var = Ps if Ps.ndim == 2 else np.diagonal(Ps, axis1=1, axis2=2)   # variances or covariances
+    return traj, np.sqrt(np.maximum(var, 0.0))
 
 
 def apply_error(state, dx, layout: StateLayout):

@@ -73,6 +73,7 @@ class DeadReckoningGuard:
     def __init__(self, cfg):
         self.cfg = cfg
         self.shadows = []          # [t_branch, filter], oldest first
+        self.last_chi2 = []        # the last fix's χ² against each mature shadow
         self._buf = []             # IMU blocks since the last shadow step
         self._t_step = -np.inf
         self.alarms = 0
@@ -138,16 +139,24 @@ class DeadReckoningGuard:
     def rejects(self, t, lat, lon, h, sigma_h, scale=1.0):
         """The oldest mature shadow (its entry) that rejects the fix (horizontal χ²), or None.
 
-        ``scale`` inflates the shadows' σ (``dr_sigma_scale``: an EKF's dead-reckoning
+        ``scale`` inflates the shadows' σ (``sigma_scale``: an EKF's dead-reckoning
         covariance is optimistic after the alignment, and a false alarm costs a reset).
+        The fix's χ² (2 dof, σ not inflated) against every mature shadow is kept in
+        :attr:`last_chi2` for the noise calibration.
         """
         self._flush()
+        self.last_chi2 = []
+        found = None
+        R = np.eye(2) * sigma_h**2
         for e in self.mature(t):
             r, H = e[1].position_residual(lat, lon, h)
-            S = (H @ e[1].P @ H.T)[:2, :2] * scale**2 + np.eye(2) * sigma_h**2
-            if float(r[:2] @ np.linalg.solve(S, r[:2])) > self.cfg.shadows.shadow_gate:
-                return e
-        return None
+            HPH = (H[:2] @ e[1].P @ H[:2].T)
+            d = r[:2]
+            self.last_chi2.append(float(d @ np.linalg.solve(HPH + R, d)))
+            if found is None and float(d @ np.linalg.solve(HPH * scale**2 + R, d)) > \
+                    self.cfg.shadows.shadow_gate:
+                found = e
+        return found
 
     def dragged(self, t, flt, scale=1.0):
         """The oldest mature shadow from which ``flt`` has moved farther than the two
@@ -238,7 +247,8 @@ class FixChain:
     linked to a fix that was used or itself anchored: a chain of such fixes is evidence
     against an INS that rejects them, not against the fixes. A jump, white noise or a drift
     breaks the chain; a fix without velocity (or too imprecise for the test to mean anything)
-    is never anchored. Horizontal only.
+    is never anchored, and a change of the receiver's quality flag (RTK fixed → float, …)
+    breaks the chain: such switches come with jumps. Horizontal only.
 
     Parameters
     ----------
@@ -256,6 +266,7 @@ class FixChain:
         self.gate = gate
         self.hist = []          # (t, p_EN (2,), v_EN (2,), σ_p, σ_v, anchored)
         self.breaks = 0
+        self._quality = None
 
     def _test(self, a, b, span):
         dt = b[0] - a[0]
@@ -270,12 +281,16 @@ class FixChain:
         var = a[3] ** 2 + b[3] ** 2 + var_v + (self.vel_bias * dt) ** 2
         return float(d @ d) / var <= self.gate and dt > 0
 
-    def add(self, t, p_en, v_en, sigma_p, sigma_v, used_prev: bool):
-        """Add a fix; returns ``(linked, anchored)``. ``used_prev``: the previous fix was used."""
+    def add(self, t, p_en, v_en, sigma_p, sigma_v, used_prev: bool, quality=None):
+        """Add a fix; returns ``(linked, anchored)``. ``used_prev``: the previous fix was used;
+        ``quality``: the receiver's flag (any scale; a change breaks the chain)."""
         if self.hist:
             last = self.hist[-1]
             self.hist[-1] = last[:5] + (last[5] or used_prev,)
-        ok = (v_en is not None and np.all(np.isfinite(v_en)) and sigma_p <= self.max_sigma)
+        same_quality = quality is None or self._quality is None or quality == self._quality
+        self._quality = quality
+        ok = (v_en is not None and np.all(np.isfinite(v_en)) and sigma_p <= self.max_sigma
+              and same_quality)
         rec = (float(t), np.asarray(p_en, float)[:2], None if v_en is None else np.asarray(v_en, float)[:2],
                float(sigma_p), float(sigma_v), False)
         linked = False

@@ -122,7 +122,10 @@ class StreamingNavigator:
     road_aid : callable, optional
         ``road_aid(t, flt) -> None | dict`` (see :func:`run_filter`).
     record : bool
-        Keep every epoch for :meth:`result` (and the smoother).
+        Keep every epoch for :meth:`result`.
+    smoother : bool
+        Also keep what the RTS smoother needs (covariances, transitions, corrections); without
+        it only the state and the error-state variances are kept (faster, less memory).
 
     Notes
     -----
@@ -130,7 +133,8 @@ class StreamingNavigator:
     at the next epoch, which batch processing would not do).
     """
 
-    def __init__(self, cfg: FilterConfig, init: dict, *, road_aid=None, record: bool = True):
+    def __init__(self, cfg: FilterConfig, init: dict, *, road_aid=None, record: bool = True,
+                 smoother: bool = True):
         self.cfg = cfg
         t0 = float(init["t"])
         flt = InsGnssFilter(cfg, t0, init["lat"], init["lon"], init["h"], init["velocity_n"],
@@ -150,6 +154,7 @@ class StreamingNavigator:
         self.t0 = t0
         self.road_aid = road_aid
         self.record = record
+        self.smoother = smoother
         self._n_aid = 1
         self._events = []          # heap of (t, kind, seq, k)
         self._seq = 0
@@ -299,10 +304,12 @@ class StreamingNavigator:
         f = np.concatenate(self._buf_f)
         dt = np.concatenate(self._buf_dt)
         self._buf_t, self._buf_w, self._buf_f, self._buf_dt = [], [], [], []
-        p0 = (flt.ins.lat, flt.ins.lon, flt.ins.h)
-        flt.predict(t, w * dt[:, None], f * dt[:, None])
-        self._block = (t, w * dt[:, None], f * dt[:, None])
-        self.disp += enu_offset(*p0, flt.ins.lat, flt.ins.lon, flt.ins.h)
+        s = flt.ins.state_array()
+        p0 = (s[0], s[1], s[2])
+        dth, dv = w * dt[:, None], f * dt[:, None]
+        flt.predict(t, dth, dv)
+        self._block = (t, dth, dv)
+        self.disp += enu_offset(*p0, s[0], s[1], s[2])
         return w, f
 
     def _store(self, te, Pm, dx):
@@ -313,6 +320,11 @@ class StreamingNavigator:
         r = self.rec
         r["t"].append(te)
         r["state"].append(pack_state(self.flt))
+        r["q"].append(self._row_status(te))
+        if not self.smoother:
+            r["P"].append(np.diag(self.flt.P).copy())
+            self._widened, self._reset = None, False
+            return
         r["P"].append(self.flt.P.copy())
         # covariance added without a measurement is process noise: part of the prior
         r["Pm"].append(Pm if self._widened is None else Pm + self._widened)
@@ -320,7 +332,6 @@ class StreamingNavigator:
         r["Phi"].append(self.flt.take_transition())
         r["dx"].append(dx)
         r["brk"].append(self._reset)
-        r["q"].append(self._row_status(te))
         self._reset = False
 
     def _row_status(self, te):
@@ -342,7 +353,7 @@ class StreamingNavigator:
             w_blk, f_blk = self._predict()
         else:
             w_blk = f_blk = np.zeros((0, 3))
-        Pm = flt.P.copy()
+        Pm = flt.P.copy() if self.smoother else None
         dx = np.zeros(flt.nx)
         veh = cfg.vehicle
         if kind == 1:
@@ -382,7 +393,8 @@ class StreamingNavigator:
             return False, False
         p = enu_offset(self.fixes[0].lat, self.fixes[0].lon, 0.0, fx.lat, fx.lon, 0.0)
         v = None if fx.velocity_n is None else fx.velocity_n[:2]
-        out = self.chain.add(fx.t, p[:2], v, fx.sigma_file, fx.sigma_vel, self._last_used)
+        out = self.chain.add(fx.t, p[:2], v, fx.sigma_file, fx.sigma_vel, self._last_used,
+                             fx.quality)
         return out
 
     def _log(self, k, code, reason, **vals):
@@ -418,6 +430,8 @@ class StreamingNavigator:
             reason = f"χ² gate (NIS {nis_h:.3g})"
         ok_v = nis_v <= CHI2_1_999 * (out.soft_gate if soft else 1.0)
         guard = self.guard
+        if guard is not None:
+            guard.last_chi2 = []
         shadow_rej = None if (guard is None or self.suspect) else guard.rejects(
             fx.t, fx.lat, fx.lon, fx.h, fx.sigma_h, self._shadow_scale())
         win_ok = True
@@ -530,14 +544,11 @@ class StreamingNavigator:
             self.adapter.on_fix(flt, q, 2)
 
     def _adapt(self, fx, nis_h):
-        ad, flt = self.adapter, self.flt
-        ad.on_fix(flt, nis_h, 2)
-        if self.guard is None:
-            return
-        for _, sh in self.guard.mature(fx.t):
-            r, H = sh.position_residual(fx.lat, fx.lon, fx.h)
-            S = (H @ sh.P @ H.T)[:2, :2] + np.eye(2) * fx.sigma_h**2
-            ad.on_shadow(float(r[:2] @ np.linalg.solve(S, r[:2])), 2)
+        ad = self.adapter
+        ad.on_fix(self.flt, nis_h, 2)
+        if self.guard is not None:
+            for c in self.guard.last_chi2:      # this fix against each mature shadow
+                ad.on_shadow(c, 2)
 
     def _shadow_scale(self):
         return (self.cfg.shadows.sigma_scale if self.adapter is None
@@ -591,8 +602,10 @@ class StreamingNavigator:
         elif not win_ok:
             reason = reason or "window test while dead-reckoning"
         # the INS itself lost? the recent fixes fit one smooth track by themselves, but not the
-        # INS displacement, for reinit_after seconds: re-initialise from them
-        if not win_ok and len(self.win) >= out.window and self._fixes_smooth(fx.t):
+        # INS displacement, for reinit_after seconds: re-initialise from them — unless a
+        # dead-reckoning reference (a mature shadow when it went suspect) says that smooth track
+        # is a drift (then only after an outage longer than any outlier episode)
+        if long_out and not win_ok and len(self.win) >= out.window and self._fixes_smooth(fx.t):
             self._lost_since = fx.t if self._lost_since is None else self._lost_since
             if fx.t - self._lost_since >= out.reinit_after and self._reinit(fx.t):
                 return True, "INS lost: re-initialised from the fixes", np.zeros(flt.nx)
@@ -602,8 +615,8 @@ class StreamingNavigator:
             # a long run of self-consistent fixes that the dead reckoning cannot explain: its
             # drift exceeded P. After a long dead reckoning the velocity and heading are as
             # suspect as the position: start them again from the run; else widen P
-            if fx.t - self._t_suspect > out.reinit_after and self._fixes_smooth(fx.t) \
-                    and self._reinit(fx.t):
+            if long_out and fx.t - self._t_suspect > out.reinit_after \
+                    and self._fixes_smooth(fx.t) and self._reinit(fx.t):
                 self.reacq += 1
                 return True, "re-acquired: re-initialised from the fixes", np.zeros(flt.nx)
             add = np.zeros_like(flt.P)
@@ -687,6 +700,8 @@ class StreamingNavigator:
         states = np.asarray(r["state"])
         Ps = np.asarray(r["P"])
         smoothed = False
+        if smooth and not self.smoother:
+            raise SelfnavError("this navigator kept no smoother record (smoother=False)")
         if smooth and len(t) > 2:
             states, Ps = rts_smooth(states, Ps, np.asarray(r["Pm"]), np.asarray(r["Phi"]),
                                     np.asarray(r["dx"]), self.flt.layout,
@@ -708,6 +723,7 @@ class StreamingNavigator:
                  "shadow_resets": 0 if self.guard is None else self.guard.alarms,
                  "ins_widened": self.ins_widened, "reinitialisations": self.reinits,
                  "noise_scale": float(self.flt.q_scale),
+                 "bias_noise_scale": float(self.flt.bias_scale),
                  "shadow_sigma_scale": float(self._shadow_scale())}
         fix_log = {k: np.asarray(v) for k, v in self.log.items()}
         fix_log["status"] = np.array([STATUS[c] for c in st], dtype=object)
@@ -721,6 +737,33 @@ class StreamingNavigator:
             states[:, PACK["toff"]][:, 0] if lay.toff is not None else None,
             np.array([codes[c] for c in q], dtype=object), fix_log,
             states[:, PACK["odo"]][:, 0] if lay.odo is not None else None)
+
+
+def concatenate_results(results) -> FilterResult:
+    """One :class:`FilterResult` from the results of consecutive segments (an IMU gap between
+    each): epochs and fixes joined in time order, the counts summed."""
+    if len(results) == 1:
+        return results[0]
+
+    def cat(name):
+        xs = [getattr(r, name) for r in results]
+        return None if any(x is None for x in xs) else np.concatenate(xs)
+
+    tr = [r.trajectory for r in results]
+    traj = Trajectory(np.concatenate([x.t for x in tr]), np.concatenate([x.lat for x in tr]),
+                      np.concatenate([x.lon for x in tr]), np.concatenate([x.h for x in tr]),
+                      np.concatenate([x.velocity_n for x in tr]),
+                      np.concatenate([x.C_nb for x in tr]), tr[0].source)
+    stats = {}
+    for r in results:
+        for k, v in r.stats.items():
+            stats[k] = stats[k] + v if k in stats and isinstance(v, (int, float)) else v
+    log = {k: np.concatenate([r.fix_log[k] for r in results]) for k in results[0].fix_log}
+    return FilterResult(traj, cat("sigma_enu"), cat("sigma_vel"), cat("sigma_att"),
+                        cat("gyro_bias"), cat("accel_bias"), cat("fix_t"), cat("fix_status"),
+                        cat("innovations"), cat("nis"), cat("mode"), results[0].smoothed, stats,
+                        cat("mounting"), cat("lever_arm"), cat("time_offset"),
+                        cat("gnss_status"), log, cat("odometer_scale"))
 
 
 def output_trajectory(res: FilterResult, *, antenna: bool = False) -> Trajectory:
@@ -782,7 +825,7 @@ def run_filter(imu, gnss: GnssData, cfg: FilterConfig | None = None, *, init=Non
     n = len(gnss.t)
     if init is None:
         init = init_from_gnss(imu, gnss, cfg, fixes_sigma(gnss, cfg))
-    nav = StreamingNavigator(cfg, init, road_aid=road_aid)
+    nav = StreamingNavigator(cfg, init, road_aid=road_aid, smoother=smooth)
 
     def col(x, k):
         return np.nan if x is None else x[k]

@@ -40,6 +40,7 @@ from numba import njit
 
 from selfnav.earth import SEED004_GAMMA_E, SEED004_GAMMA_P, WGS84, Ellipsoid
 from selfnav.errors import SelfnavError
+from selfnav.kernels import rodrigues
 from selfnav.types import Trajectory
 
 _VERTICAL = {"free": 0, "fixed": 1}
@@ -63,28 +64,6 @@ def _gravity(lat, h, a, e2, f, m, ge, k):
     """Normal gravity, identical to :func:`selfnav.earth.normal_gravity` (seed 004 (4))."""
     s2 = np.sin(lat) ** 2
     return _gravity_sw(s2, np.sqrt(1.0 - e2 * s2), h, a, f, m, ge, k)
-
-
-@njit(cache=True)
-def _rodrigues(x, y, z, out):
-    """``exp([v])`` for the rotation vector ``v = (x, y, z)``, written into ``out`` (3, 3)."""
-    th2 = x * x + y * y + z * z
-    if th2 < 1e-4:  # |v| < 0.01 rad: series, truncation < 1e-21
-        A = 1.0 - th2 / 6.0 * (1.0 - th2 / 20.0 * (1.0 - th2 / 42.0))
-        B = 0.5 - th2 / 24.0 * (1.0 - th2 / 30.0 * (1.0 - th2 / 56.0))
-    else:
-        th = np.sqrt(th2)
-        A = np.sin(th) / th
-        B = (1.0 - np.cos(th)) / th2
-    out[0, 0] = 1.0 + B * (x * x - th2)
-    out[0, 1] = -A * z + B * x * y
-    out[0, 2] = A * y + B * x * z
-    out[1, 0] = A * z + B * x * y
-    out[1, 1] = 1.0 + B * (y * y - th2)
-    out[1, 2] = -A * x + B * y * z
-    out[2, 0] = -A * y + B * x * z
-    out[2, 1] = A * x + B * y * z
-    out[2, 2] = 1.0 + B * (z * z - th2)
 
 
 @njit(cache=True)
@@ -188,8 +167,8 @@ def _mechanize(dth, dvb, dts, defl, anom, href, s, p, prm, out_pos, out_vel, out
             fx += (py * tz - pz * ty) / 12.0
             fy += (pz * tx - px * tz) / 12.0
             fz += (px * ty - py * tx) / 12.0
-        _rodrigues(-zx, -zy, -zz, Z)
-        _rodrigues(fx, fy, fz, B)
+        rodrigues(-zx, -zy, -zz, Z)
+        rodrigues(fx, fy, fz, B)
         for i in range(3):
             for j in range(3):
                 T[i, j] = C[i, 0] * B[0, j] + C[i, 1] * B[1, j] + C[i, 2] * B[2, j]
@@ -314,6 +293,7 @@ class Strapdown:
         self.deflection = np.asarray(deflection, dtype=float)
         self.anomaly = np.asarray(anomaly, dtype=float)
         self.h_ref = np.asarray(h if h_ref is None else h_ref, dtype=float)
+        self._fixed = None     # constant gravity inputs of advance(), built on first use
 
     # ---- state access
     def set_state(self, *, lat=None, lon=None, h=None, velocity_n=None, C_nb=None, check=True):
@@ -337,6 +317,11 @@ class Strapdown:
             if check and not np.allclose(C @ C.T, np.eye(3), atol=1e-6):
                 raise SelfnavError("C_nb is not a rotation matrix")
             s[6:15] = C.T.reshape(9)
+
+    def state_array(self) -> np.ndarray:
+        """The live state vector (lat, lon, h, v^n (3), C_b^n row-major (9)) for filters that
+        correct it in place (compiled kernels); keep ``C_b^n`` a rotation."""
+        return self._s
 
     @property
     def lat(self) -> float:
@@ -392,6 +377,23 @@ class Strapdown:
                   None if anomaly is None else [anomaly])
         self.t += dt
         return self.state
+
+    def advance(self, t, dt, dtheta, dv):
+        """The filter's fast path of :meth:`run`: advance over intervals of lengths ``dt``
+        ending at times ``t`` (C-contiguous float64 arrays, checked by the caller) with the
+        constructor's gravity options; returns the last attitude ``C_nb``."""
+        n = dtheta.shape[0]
+        pos = np.empty((n, 3))
+        vel = np.empty((n, 3))
+        C = np.empty((n, 3, 3))
+        if self._fixed is None:
+            self._fixed = (_per_sample(self.deflection, n, 2, "deflection"),
+                           _per_sample(self.anomaly, n, 0, "anomaly"),
+                           _per_sample(self.h_ref, n, 0, "h_ref"))
+        defl, anom, href = self._fixed
+        _mechanize(dtheta, dv, dt, defl, anom, href, self._s, self._p, self._prm, pos, vel, C)
+        self.t = float(t[-1])
+        return C[-1]
 
     def run(self, t, dtheta, dv, *, h_ref=None, deflection=None, anomaly=None) -> Trajectory:
         """Advance over a batch of intervals ending at times ``t`` (N,); returns the N new states.

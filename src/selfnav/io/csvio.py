@@ -1,26 +1,25 @@
 """Native CSV files (DESIGN §6): header row, ``#`` comments, extra columns kept and ignored.
 
 Reading validates shape and values and names the line and column of the first problem; writing
-goes to a temporary file in the target folder that is moved into place, so nothing is left
-half-written.
+goes through :mod:`selfnav.io.output` (a temporary file moved into place, through symlinks, never
+over special files), so nothing is left half-written.
 """
 from __future__ import annotations
 
-import contextlib
 import difflib
 import gzip
 import io
 import re
-import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
 from selfnav.errors import InputError
+from selfnav.io.output import atomic_path, atomic_write_bytes  # noqa: F401 (re-exported)
 
 
 def open_text(path: Path) -> str:
+    """The text of a file (UTF-8, gzip-compressed or not), or one line saying why not."""
     try:
         raw = path.read_bytes()
     except FileNotFoundError:
@@ -38,6 +37,17 @@ def open_text(path: Path) -> str:
         return raw.decode("utf-8-sig")
     except UnicodeDecodeError:
         raise InputError(path, "is not a text file (not UTF-8): is it a binary log?") from None
+
+
+def _is_plain_text(path: Path) -> bool:
+    """True when the file on disk is not gzip-compressed (numpy can then read it directly)."""
+    if path.suffix == ".gz":
+        return False
+    try:
+        with open(path, "rb") as fh:
+            return fh.read(2) != b"\x1f\x8b"
+    except OSError:
+        return False
 
 
 class _LineNumbers:
@@ -83,7 +93,7 @@ def read_table(path, required, optional=(), *, numeric=True):
     """
     path = Path(path)
     text = open_text(path)
-    plain = path.suffix != ".gz" and not text.startswith("\ufeff") and "\r" not in text[:4096]
+    plain = _is_plain_text(path) and not text.startswith("\ufeff") and "\r" not in text[:4096]
     pos, line_no = 0, 0
     header_line = None
     while pos < len(text):
@@ -173,28 +183,10 @@ def check_time(table, column="t", *, min_rows=1):
     if np.any(d <= 0):
         k = int(np.argmax(d <= 0)) + 1
         kind = "repeated" if d[k - 1] == 0 else "going backwards (unsorted)"
-        raise InputError(path, f"time {t[k]!r} is {kind}: samples must be strictly increasing",
+        raise InputError(path, f"time {float(t[k]):.10g} is {kind}: samples must be strictly "
+                         "increasing",
                          row=int(table["_lines"][k]), column=column)
     return t
-
-
-@contextlib.contextmanager
-def atomic_path(path):
-    """Yield a temporary path beside ``path``; move it into place only if the block succeeds.
-
-    Nothing half-written is ever left at ``path`` (nor the temporary file, on failure).
-    """
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    os.close(fd)
-    try:
-        yield tmp
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
 
 
 def write_csv(path, columns: dict, *, comments=(), fmt="%.10g"):
@@ -234,8 +226,78 @@ def write_csv(path, columns: dict, *, comments=(), fmt="%.10g"):
     return path
 
 
-def atomic_write_bytes(path, data: bytes):
-    """Write bytes to ``path`` through a temporary file moved into place."""
-    with atomic_path(path) as tmp, open(tmp, "wb") as fh:
-        fh.write(data)
-    return Path(path)
+def check_positive(table, column):
+    """Refuse a column with a value ≤ 0 (a σ, a length) naming the first such row; returns the
+    column (or None when the table lacks it)."""
+    x = table.get(column)
+    if x is None:
+        return None
+    bad = ~(x > 0)
+    if bad.any():
+        k = int(np.argmax(bad))
+        raise InputError(table["_path"], f"{column} {float(x[k]):g} must be positive",
+                         row=int(table["_lines"][k]), column=column)
+    return x
+
+
+# ------------------------------------------------------------------ time columns
+#: ISO-8601 date-times: ``2019-03-11T08:33:24``, optional fraction and zone (``Z``, ``+02:00``);
+#: ``2019/03/11 08:33:24`` is read as the same
+_ISO_HINT = re.compile(r"^\s*\d{4}[-/]?\d{2}[-/]?\d{2}[T ]")
+_SLASH_DATE = re.compile(r"^(\s*\d{4})/(\d{2})/(\d{2})")
+
+
+def parse_numbers(texts):
+    """Strings to float64; returns ``(values, bad)`` with ``bad`` the indices of entries that
+    are not numbers (empty strings count as bad; their values are NaN)."""
+    texts = list(texts)
+    try:
+        vals = np.asarray(texts, dtype=float) if texts else np.zeros(0)
+        return vals, np.zeros(0, np.int64)
+    except ValueError:
+        pass
+    vals = np.full(len(texts), np.nan)
+    bad = []
+    for k, s in enumerate(texts):
+        try:
+            vals[k] = float(s)
+        except (TypeError, ValueError):
+            bad.append(k)
+    return vals, np.asarray(bad, np.int64)
+
+
+def parse_times(texts):
+    """A time column as seconds: numbers (seconds; epoch milliseconds are recognised by their
+    size) or ISO-8601 date-times (with a zone, or without one: then read as UTC).
+
+    Returns
+    -------
+    t : (N,) float64 s (NaN where unreadable)
+    form : {"seconds", "milliseconds", "iso"}
+        What the column holds (decided by its first readable entry).
+    bad : (K,) int
+        Indices of entries that are not of that form.
+    """
+    import datetime as dt
+
+    texts = list(texts)
+    first = next((s for s in texts if s and s.strip()), "")
+    if not _ISO_HINT.match(first):
+        t, bad = parse_numbers(texts)
+        ok = np.isfinite(t)
+        if ok.any() and np.median(np.abs(t[ok])) > 1e11:      # after the year 5000 in seconds:
+            return t / 1000.0, "milliseconds", bad            # epoch milliseconds
+        return t, "seconds", bad
+    t = np.full(len(texts), np.nan)
+    bad = []
+    utc = dt.timezone.utc
+    for k, s in enumerate(texts):
+        try:
+            d = dt.datetime.fromisoformat(_SLASH_DATE.sub(r"\1-\2-\3", s.strip()))
+        except (AttributeError, TypeError, ValueError):
+            bad.append(k)
+            continue
+        if d.tzinfo is None:
+            d = d.replace(tzinfo=utc)
+        t[k] = d.timestamp()
+    return t, "iso", np.asarray(bad, np.int64)

@@ -4,13 +4,14 @@ from __future__ import annotations
 
 import calendar
 import datetime as _dt
+import warnings
 from pathlib import Path
 
 import numpy as np
 
-from selfnav import datum as dm
-from selfnav.errors import InputError
-from selfnav.io.csvio import check_time, open_text, read_table
+from selfnav.errors import InputError, SelfnavWarning
+from selfnav.io.csvio import open_text
+from selfnav.io.fleet import build_tracks, read_columns, to_wgs84  # noqa: F401 (re-exported)
 from selfnav.types import GnssData
 
 #: GPS time origin 1980-01-06 in Unix-like seconds; GPS week seconds are counted from a Sunday.
@@ -20,36 +21,33 @@ WEEK = 604800.0
 
 
 
-def to_wgs84(lat, lon, h, datum, path):
-    d = (datum or "wgs84").lower().replace("-", "").replace(".", "").replace("_", "")
-    if d == "wgs84":
-        return lat, lon, h
-    out = dm.convert(lat, lon, h, d, "wgs84")
-    return out[0], out[1], out[2]
-
-
 def read_gnss_csv(path, datum: str = "wgs84") -> GnssData:
-    """Native GNSS CSV: ``t, lat_deg, lon_deg, h_m`` and optional ``sigma_m``, ``ve, vn, vu``."""
-    tab = read_table(path, ("t", "lat_deg", "lon_deg", "h_m"), optional=("sigma_m", "ve", "vn", "vu"))
-    t = check_time(tab, min_rows=2)
-    lat_deg, lon_deg = tab["lat_deg"], tab["lon_deg"]
-    for name, v, lim in (("lat_deg", lat_deg, 90.0), ("lon_deg", lon_deg, 360.0)):
-        bad = np.abs(v) > lim
-        if bad.any():
-            k = int(np.argmax(bad))
-            raise InputError(path, f"{v[k]} is not a {name[:3]}itude in degrees (radians? "
-                             "projected metres? swapped columns?)", row=int(tab["_lines"][k]),
-                             column=name)
-    sig = tab.get("sigma_m")
-    if sig is not None and np.any(sig <= 0):
-        k = int(np.argmax(sig <= 0))
-        raise InputError(path, f"sigma_m {sig[k]} must be positive", row=int(tab["_lines"][k]),
-                         column="sigma_m")
-    vel = None
-    if all(k in tab for k in ("ve", "vn", "vu")):
-        vel = np.column_stack([tab["ve"], tab["vn"], tab["vu"]])
-    lat, lon, h = to_wgs84(np.radians(lat_deg), np.radians(lon_deg), tab["h_m"], datum, path)
-    return GnssData(t, np.asarray(lat), np.asarray(lon), np.asarray(h), sig, vel, None, str(path))
+    """Native GNSS CSV: ``t, lat_deg, lon_deg, h_m`` and optional ``sigma_m``, ``ve, vn, vu``.
+
+    ``t`` in seconds or ISO-8601 date-times (then seconds since 1970, UTC); rows out of time
+    order are ordered and repeated time stamps merged (positions averaged), each with a one-line
+    :class:`~selfnav.errors.SelfnavWarning`. A value that is not a number is an error naming the
+    line. One track per file (a ``track_id`` column with several tracks is refused: ``selfnav
+    match`` reads fleets).
+    """
+    cols, lines = read_columns(path, ("t", "lat_deg", "lon_deg", "h_m"),
+                               ("sigma_m", "ve", "vn", "vu", "track_id"))
+    tracks, form, counts = build_tracks(path, cols, lines, datum=datum, strict=True,
+                                        velocity=True)
+    if len(tracks) > 1:
+        raise InputError(path, f"holds {len(tracks)} tracks (column track_id): navigation takes "
+                         "one; split the file (selfnav match reads fleets)")
+    tr = tracks[0]
+    if tr.error is not None:
+        raise InputError(path, f"has {len(np.unique(tr.row_fix))} distinct time stamps; at "
+                         "least 2 are needed")
+    if counts["reordered"]:
+        warnings.warn(f"{path}: rows out of time order ordered by time ({counts['reordered']} "
+                      "steps back)", SelfnavWarning, stacklevel=2)
+    if counts["merged"]:
+        warnings.warn(f"{path}: {counts['merged']} repeated time stamps merged (positions "
+                      "averaged)", SelfnavWarning, stacklevel=2)
+    return tr.gnss
 
 
 def gps_seconds_of_week(unix_like_gpst):
@@ -99,6 +97,7 @@ def read_rtklib_pos(path) -> GnssData:
     if np.all(np.isfinite(a[:, 14:17])):
         vel = np.column_stack([a[:, 15], a[:, 14], a[:, 16]])  # ve, vn, vu
     sig = np.maximum(a[:, 6], a[:, 7])  # sdn, sde
+    sig = np.where(sig > 0, sig, np.nan)  # 0: not estimated (never a σ of zero)
     sig_vel = None
     if vel is not None and np.all(np.isfinite(a[:, 17:19])) and np.all(a[:, 17:19] > 0):
         sig_vel = np.maximum(a[:, 17], a[:, 18])  # sdvn, sdve
@@ -146,5 +145,7 @@ def read_nmea(path) -> GnssData:
     if not t:
         raise InputError(path, "no valid GGA fixes (is it NMEA?)")
     t = np.unwrap(np.asarray(t), period=86400.0)
-    return GnssData(t, np.radians(lat), np.radians(lon), np.asarray(h), np.asarray(sig), None,
+    sig = np.asarray(sig, dtype=float)
+    sig = np.where(sig > 0, sig, np.nan)  # HDOP 0: not given (never a σ of zero)
+    return GnssData(t, np.radians(lat), np.radians(lon), np.asarray(h), sig, None,
                     np.asarray(q), str(path))

@@ -125,7 +125,7 @@ def _check_time(path, t, line_no, column="sow"):
         k = int(np.argmax(d <= 0)) + 1
         why = "repeated" if d[k - 1] == 0 else (
             "going backwards (a GPS week rollover? unsorted rows?)")
-        raise InputError(path, f"time {t[k]!r} is {why}: samples must be strictly increasing",
+        raise InputError(path, f"time {float(t[k]):.10g} is {why}: samples must be strictly increasing",
                          row=int(line_no[k]), column=column)
 
 

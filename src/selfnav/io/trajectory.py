@@ -15,19 +15,26 @@ TRUTH_COLUMNS = ("t", "lat_deg", "lon_deg", "h_m", "ve", "vn", "vu", "roll_deg",
                  "heading_deg")
 
 
-def write_truth(path, traj: Trajectory, comments=()):
-    """Write a truth/solution CSV (DESIGN §6) atomically."""
-    cols = {"t": traj.t, "lat_deg": np.degrees(traj.lat), "lon_deg": np.degrees(traj.lon),
-            "h_m": traj.h}
-    # unknown velocity or attitude (NaN) is left out rather than written as nan
+def trajectory_columns(traj: Trajectory, lat=None, lon=None, h=None) -> dict:
+    """The DESIGN §6 columns of a trajectory (positions replaced by ``lat, lon, h`` in rad, m
+    when given, e.g. in another datum); unknown velocity or attitude (NaN) is left out rather
+    than written as nan."""
+    lat, lon, h = (traj.lat if lat is None else lat, traj.lon if lon is None else lon,
+                   traj.h if h is None else h)
+    cols = {"t": traj.t, "lat_deg": np.degrees(lat), "lon_deg": np.degrees(lon), "h_m": h}
     if np.all(np.isfinite(traj.velocity_n)):
         cols.update(ve=traj.velocity_n[:, 0], vn=traj.velocity_n[:, 1], vu=traj.velocity_n[:, 2])
     if np.all(np.isfinite(traj.C_nb)):
         roll, pitch, heading = att.euler_from_dcm_nb(traj.C_nb)
         cols.update(roll_deg=np.degrees(roll), pitch_deg=np.degrees(pitch),
                     heading_deg=np.degrees(heading))
+    return cols
+
+
+def write_truth(path, traj: Trajectory, comments=()):
+    """Write a truth/solution CSV (DESIGN §6) atomically."""
     fmt = {k: "%.10f" for k in ("lat_deg", "lon_deg")}
-    return write_csv(path, cols, comments=[traj.source, *comments], fmt=fmt)
+    return write_csv(path, trajectory_columns(traj), comments=[traj.source, *comments], fmt=fmt)
 
 
 def read_truth(path) -> Trajectory:

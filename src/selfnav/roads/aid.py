@@ -276,8 +276,7 @@ class EkfRoadAid:
 
     def _grade_prior(self, t, flt, v):
         """Level-road prior on the vertical velocity (class docstring)."""
-        if self.grade_sigma is None or t - self.t_grade < self.interval - 1e-9 \
-                or not hasattr(flt, "kalman"):
+        if self.grade_sigma is None or t - self.t_grade < self.interval - 1e-9:
             return
         self.t_grade = t
         H = np.zeros((1, flt.nx))

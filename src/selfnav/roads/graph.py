@@ -30,6 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from selfnav.errors import InputError
+from selfnav.roads.grid import SegmentGrid, grid_candidates, nearest_distance
 
 #: ``highway=*`` values a car may drive on.
 DRIVABLE = frozenset({
@@ -153,6 +154,12 @@ class Candidates:
         """A subset (boolean mask or index array)."""
         return Candidates(self.query[idx], self.seg[idx], self.along[idx], self.cross[idx],
                           self.dist[idx], self.foot[idx])
+
+
+def _concat(c1: Candidates, c2: Candidates) -> Candidates:
+    return Candidates(*(np.concatenate([a, b]) for a, b in zip(
+        (c1.query, c1.seg, c1.along, c1.cross, c1.dist, c1.foot),
+        (c2.query, c2.seg, c2.along, c2.cross, c2.dist, c2.foot))))
 
 
 def project_points_to_segments(p, a, b):
@@ -283,7 +290,10 @@ class RoadGraph:
         self.seg_twin = np.array([key.get((v, u), -1) for u, v in
                                   zip(self.seg_u.tolist(), self.seg_v.tolist())], np.int64)
         self._way_codes, self._seg_way_code = np.unique(self.seg_way, return_inverse=True)
+        self._way_dir_key = (self._seg_way_code * 2
+                             + (self.seg_u < self.seg_v)).astype(np.int64)
         self._tree = None
+        self._grid = None
         self._nx = None
         self._csr = None
 
@@ -408,7 +418,7 @@ class RoadGraph:
         Parameters
         ----------
         xy : (N, 2) local metres
-        radius : float
+        radius : float or (N,)
             Search radius, m.
         k : int, optional
             Keep at most the ``k`` nearest per point.
@@ -430,66 +440,34 @@ class RoadGraph:
         n = len(xy)
         if self.n_segments == 0:
             raise InputError(self.name, "the road graph is empty: no drivable roads")
-        import shapely
-
-        pts = shapely.points(xy)
-        qi, si = self.tree.query(pts, predicate="dwithin", distance=radius)
-        cand = self._make(xy, qi, si)
-        if heading is not None and heading_tol is not None:
-            h = np.asarray(heading, float)[cand.query]
-            dh = np.abs((self.seg_heading[cand.seg] - h + np.pi) % (2 * np.pi) - np.pi)
-            cand = cand.take(np.isnan(h) | (dh <= heading_tol))
-        cand = self._prune(cand, k, per_way)
+        if per_way:
+            key, n_keys = self._way_dir_key, 2 * len(self._way_codes)
+        else:
+            key, n_keys = np.arange(self.n_segments, dtype=np.int64), self.n_segments
+        cand = Candidates(*grid_candidates(self.grid, xy, radius, k, key, n_keys, heading,
+                                           heading_tol, self.seg_heading))
         if min_candidates > 0:
             cnt = np.bincount(cand.query, minlength=n)
             few = np.flatnonzero(cnt < min_candidates)
             if len(few):
-                extra = self._nearest_k(xy, few, min_candidates)
-                both = Candidates(*(np.concatenate([a, b]) for a, b in zip(
-                    (cand.query, cand.seg, cand.along, cand.cross, cand.dist, cand.foot),
-                    (extra.query, extra.seg, extra.along, extra.cross, extra.dist, extra.foot))))
-                cand = self._prune(both, k, per_way)
+                # the nearest road whatever the distance, and whatever lies within 30 m more
+                r_few = np.broadcast_to(np.asarray(radius, float), (n,))[few]
+                d1 = nearest_distance(self.grid, xy[few], 2 * float(r_few.max()))
+                q, *rest = grid_candidates(self.grid, xy[few], np.maximum(r_few, d1 + 30.0), k,
+                                           key, n_keys)
+                is_few = np.zeros(n, bool)
+                is_few[few] = True
+                both = _concat(cand.take(~is_few[cand.query]), Candidates(few[q], *rest))
+                cand = both.take(np.argsort(both.query, kind="stable"))
         return cand
 
-    def _make(self, xy, qi, si) -> Candidates:
-        qi = np.asarray(qi, np.int64)
-        si = np.asarray(si, np.int64)
-        s, c, d, f = project_points_to_segments(xy[qi], self.xy[self.seg_u[si]],
-                                                self.xy[self.seg_v[si]])
-        return Candidates(qi, si, s, c, d, f)
-
-    def _prune(self, cand: Candidates, k, per_way) -> Candidates:
-        order = np.lexsort((cand.seg, cand.dist, cand.query))
-        cand = cand.take(order)
-        if per_way and len(cand):
-            key = (cand.query * (len(self._way_codes) + 1) + self._seg_way_code[cand.seg]) * 2 \
-                + (self.seg_u[cand.seg] < self.seg_v[cand.seg])
-            _, first = np.unique(key, return_index=True)
-            cand = cand.take(np.sort(first))   # sorted order is kept: nearest per way first
-        if k is not None and len(cand):
-            start = np.searchsorted(cand.query, cand.query, side="left")
-            rank = np.arange(len(cand)) - start
-            cand = cand.take(rank < k)
-        # a segment found twice for the same point (duplicate queries) is kept once
-        if len(cand):
-            dup = np.zeros(len(cand), bool)
-            dup[1:] = (cand.query[1:] == cand.query[:-1]) & (cand.seg[1:] == cand.seg[:-1])
-            cand = cand.take(~dup)
-        return cand
-
-    def _nearest_k(self, xy, idx, k) -> Candidates:
-        """The ``k`` nearest segments (by exact distance) for the points ``idx``."""
-        import shapely
-
-        qi, si = self.tree.query_nearest(shapely.points(xy[idx]), all_matches=True)
-        qi = idx[np.asarray(qi, np.int64)]
-        base = self._make(xy, qi, np.asarray(si, np.int64))
-        # widen to everything within the nearest distance + a margin so that k can be met
-        dmax = np.zeros(len(xy))
-        np.maximum.at(dmax, base.query, base.dist)
-        q2, s2 = self.tree.query(shapely.points(xy[idx]), predicate="dwithin",
-                                 distance=float(dmax[idx].max()) + 30.0)
-        return self._make(xy, idx[np.asarray(q2, np.int64)], np.asarray(s2, np.int64))
+    @property
+    def grid(self) -> SegmentGrid:
+        """Uniform grid over the directed segments (:mod:`selfnav.roads.grid`), built on first
+        use: the index of the candidate search."""
+        if self._grid is None:
+            self._grid = SegmentGrid(self.xy[self.seg_u], self.xy[self.seg_v])
+        return self._grid
 
     def nearest_segments(self, xy, radius=50.0, k=4, heading=None, heading_tol=None):
         """Alias of :meth:`candidates` with ``per_way=False`` (all nearby directed segments)."""
@@ -605,6 +583,37 @@ def road_polylines(path, *, highway=DRIVABLE):
     if not ways:
         raise InputError(path, "holds no drivable road (highway=residential, primary, ...)")
     return [np.radians(np.array([(la, lo) for _, lo, la in run])) for *_, run in ways]
+
+
+def map_coverage(graph: RoadGraph, lat, lon, *, margin_m: float = 1000.0) -> float:
+    """Share of the points (geodetic, rad) within ``margin_m`` of the map's extent (the box of
+    its nodes); 0 for no points."""
+    x, y = graph.to_local(np.atleast_1d(lat), np.atleast_1d(lon))
+    if x.size == 0:
+        return 0.0
+    xmin, ymin, xmax, ymax = graph.bounds()
+    inside = ((x > xmin - margin_m) & (x < xmax + margin_m) & (y > ymin - margin_m)
+              & (y < ymax + margin_m))
+    return float(np.mean(inside & np.isfinite(x) & np.isfinite(y)))
+
+
+def check_map_covers(graph: RoadGraph, lat, lon, *, what: str = "fixes", source=None,
+                     margin_m: float = 1000.0) -> float:
+    """Refuse a map that none of the points (rad) lies on, in one line; warn when some lie off
+    it. Returns the share on the map (:func:`map_coverage`)."""
+    from selfnav.errors import warn
+
+    share = map_coverage(graph, lat, lon, margin_m=margin_m)
+    n = int(np.size(lat))
+    km = f"{margin_m / 1e3:g} km"
+    if share == 0.0:
+        where = "this map" if source is None else f"the map {graph.name}"
+        raise InputError(source or graph.name, f"none of the {n} {what} lies within {km} of "
+                         f"{where}: a map of another place, or a datum or degree mix-up?")
+    if share < 1.0:
+        warn(f"{100 * (1 - share):.0f} % of the {n} {what} lie more than {km} outside the map "
+             f"{graph.name}: the map does not cover the data")
+    return share
 
 
 def packaged_map(name: str) -> Path:

@@ -16,9 +16,10 @@ sparseness"):
 * **breaks**: where no transition is possible (a gap, or a jump no road explains) the chain
   restarts from the emission probabilities alone, and decoding continues.
 
-Route distances come from ``scipy.sparse.csgraph.dijkstra`` run once per distinct candidate
-end node (in blocks, with a distance limit), the pair bookkeeping is vectorized numpy, and the
-Viterbi recursion is a numba kernel over flat (CSR) arrays.
+Route distances come from a :class:`~selfnav.roads.routes.RouteCache` (bounded Dijkstra per
+candidate end node, kept and reused across fixes and tracks); the Viterbi recursion is one numba
+kernel that computes each transition on the fly, so nothing of size (fixes × k²) is ever stored
+and memory is O(N k). Long tracks are processed in windows (candidate search, route rows).
 
 A GNSS-only matcher cannot hold the road through long outlier windows (DESIGN §7): the
 inertial prediction is what does (the navigator). :func:`transition_route_distance` and the
@@ -33,6 +34,7 @@ import numba
 import numpy as np
 
 from selfnav.roads.graph import Candidates, RoadGraph
+from selfnav.roads.routes import RouteCache, route_gap
 
 
 @dataclass
@@ -58,6 +60,10 @@ class MatchResult:
         The chain restarted at this fix (first fix, or no transition possible).
     seconds : float
         Processing time.
+    way : (N,) int64
+        OpenStreetMap way id of the matched segment.
+    sigma : float
+        The GNSS σ the track was matched with where its fixes give none, m.
     """
 
     t: np.ndarray
@@ -70,6 +76,8 @@ class MatchResult:
     in_radius: np.ndarray
     restart: np.ndarray
     seconds: float = 0.0
+    way: np.ndarray | None = None
+    sigma: float = float("nan")
 
     def summary(self) -> dict:
         n = len(self.t)
@@ -84,64 +92,22 @@ class MatchResult:
         }
 
 
-def _pairs(off):
-    """All candidate pairs between consecutive fixes, flat: ``(epoch, i, j, pair_off)``."""
-    kt = np.diff(off)
-    P = kt[:-1] * kt[1:]
-    pair_off = np.concatenate([[0], np.cumsum(P)])
-    tb = np.repeat(np.arange(len(P)), P)
-    q = np.arange(pair_off[-1]) - pair_off[tb]
-    kn = kt[tb + 1]
-    i = off[tb] + q // kn
-    j = off[tb + 1] + q % kn
-    return tb, i, j, pair_off
-
-
 class RouteDistances:
-    """Shortest route distances over the directed graph from a set of source nodes.
+    """Route distances from a fixed set of source nodes (a thin view of a :class:`RouteCache`
+    that the vectorized :func:`transition_route_distance` uses)."""
 
-    One ``scipy.sparse.csgraph.dijkstra`` per distinct source, limited to ``limit`` metres,
-    kept as a dense ``(n_sources, n_nodes)`` table when it fits in ``max_bytes`` and otherwise
-    computed block by block at lookup.
-    """
-
-    def __init__(self, graph: RoadGraph, sources, limit=np.inf, max_bytes=128_000_000):
-        self.graph = graph
-        self.sources, self._inverse = np.unique(np.asarray(sources, np.int64), return_inverse=True)
+    def __init__(self, graph: RoadGraph, sources, limit=np.inf, cache: RouteCache | None = None):
+        self.sources = np.asarray(sources, np.int64)
         self.limit = float(limit)
-        self.block = max(1, int(max_bytes // (8 * max(graph.n_nodes, 1))))
-        self._table = self._rows(0, len(self.sources)) if len(self.sources) <= self.block else None
-
-    def _rows(self, r0, r1):
-        from scipy.sparse.csgraph import dijkstra
-
-        return dijkstra(self.graph.csr, directed=True, indices=self.sources[r0:r1],
-                        limit=self.limit)
+        self.cache = cache or RouteCache(graph)
 
     def row_of(self, k):
         """Row of source number ``k`` of the array given at construction."""
-        return self._inverse[k]
+        return np.asarray(k, np.int64)
 
     def lookup(self, rows, dst):
         """Distance from source row ``rows`` to node ``dst`` (inf beyond the limit)."""
-        rows = np.asarray(rows, np.int64)
-        dst = np.asarray(dst, np.int64)
-        if self._table is not None:
-            return self._table[rows, dst]
-        out = np.full(len(rows), np.inf)
-        for r0 in range(0, len(self.sources), self.block):
-            r1 = min(r0 + self.block, len(self.sources))
-            sel = np.flatnonzero((rows >= r0) & (rows < r1))
-            if len(sel):
-                out[sel] = self._rows(r0, r1)[rows[sel] - r0, dst[sel]]
-        return out
-
-
-def node_distances(graph: RoadGraph, src, dst, limit=np.inf):
-    """Shortest route distance ``src[k] -> dst[k]`` over the directed graph (inf beyond
-    ``limit`` or where no route exists)."""
-    rd = RouteDistances(graph, src, limit)
-    return rd.lookup(rd.row_of(np.arange(len(src))), dst)
+        return self.cache.lookup(self.sources[rows], dst, self.limit)
 
 
 def transition_route_distance(graph: RoadGraph, cand: Candidates, i, j, *, backtrack=15.0,
@@ -152,8 +118,9 @@ def transition_route_distance(graph: RoadGraph, cand: Candidates, i, j, *, backt
     segments, start of segment ``j``. A move backwards shorter than ``backtrack`` metres
     (noise on a stopped or slow vehicle) counts as its length.
 
-    ``distances`` (a :class:`RouteDistances` built on ``graph.seg_v[cand.seg]``) is reused
-    when given.
+    This is the vectorized (numpy) form of the transition the matcher's numba kernel computes
+    (the tests hold one against the other); an INS-driven matcher can reuse it. ``distances``
+    (a :class:`RouteDistances` built on ``graph.seg_v[cand.seg]``) is reused when given.
     """
     if distances is None:
         distances = RouteDistances(graph, graph.seg_v[cand.seg], max(limit, backtrack))
@@ -164,47 +131,124 @@ def transition_route_distance(graph: RoadGraph, cand: Candidates, i, j, *, backt
     fwd_gap = distances.lookup(distances.row_of(i), graph.seg_u[sj])
     d_fwd = np.where(same & (aj >= ai), aj - ai, (Li - ai) + fwd_gap + aj)
     if backtrack > 0:
-        back_gap = distances.lookup(distances.row_of(j), graph.seg_u[si])
+        back_gap = RouteDistances(graph, graph.seg_v[sj], backtrack, distances.cache).lookup(
+            np.arange(len(sj)), graph.seg_u[si])
         d_back = np.where(same & (aj < ai), ai - aj, (Lj - aj) + back_gap + ai)
         d_fwd = np.where(d_back <= backtrack, np.minimum(d_fwd, d_back), d_fwd)
     return d_fwd
 
 
 @numba.njit(cache=True)
-def _viterbi(em, off, pair_off, pi, pj, logtr, score, back):  # pragma: no cover - numba
-    n = len(off) - 1
-    restart = np.zeros(n, np.bool_)
-    restart[0] = True
-    for k in range(off[0], off[1]):
-        score[k] = em[k]
-        back[k] = -1
-    for t in range(n - 1):
-        b0, b1 = off[t + 1], off[t + 2]
-        for k in range(b0, b1):
-            score[k] = -np.inf
-            back[k] = -1
-        for p in range(pair_off[t], pair_off[t + 1]):
-            v = score[pi[p]] + logtr[p]
-            if v > score[pj[p]]:
-                score[pj[p]] = v
-                back[pj[p]] = pi[p]
+def _forward(a, b, off, seg, along, foot, em, d_gc, dt, lim, fastest, seg_u, seg_v, seg_len,
+             cache_arrays, beta, backtrack, max_gap, score, back, restart, scratch,
+             stamp0):  # pragma: no cover
+    """Viterbi forward recursion over the transitions ``a -> a+1 ... b-1 -> b`` (epoch ``a``
+    already scored), transitions computed on the fly: nothing of size (pairs) is stored.
+    ``beta`` and ``backtrack`` are per fix (tracks of different σ matched together).
+
+    The route distance of a transition (the scalar form of :func:`transition_route_distance`,
+    forward gap cut at ``lim``): the end node of each candidate segment of epoch ``t`` is a
+    source, the start nodes of epoch ``t+1`` the targets; each source's cached row (in distance
+    order) is scanned once up to ``lim`` into a small source × target table. A route is never
+    shorter than the straight line between its ends, so a pair whose bound
+    ``score_i - max(0, |foot_j - foot_i| - d_gc)/β`` cannot beat the best so far is skipped
+    (same result, less work). ``score`` is kept near 0 (the best of each epoch is subtracted);
+    an epoch that no transition reaches restarts the chain from its emissions."""
+    row_of, row_start, row_len, pool_node, pool_dist = cache_arrays
+    tgt_stamp, tgt_slot, src_stamp, src_slot = scratch   # node-sized, stamped, never reset
+    kmax = 1
+    for t in range(a, b + 1):
+        kmax = max(kmax, off[t + 1] - off[t])
+    gap = np.empty((kmax, kmax))
+    for t in range(a, b):
+        i0, i1 = off[t], off[t + 1]
+        j0, j1 = off[t + 1], off[t + 2]
+        stamp = stamp0 + t
+        b_t = beta[t]
+        bt = backtrack[t + 1]
+        for j in range(j0, j1):
+            score[j] = -np.inf
+            back[j] = -1
+        if dt[t] <= max_gap:
+            n_tgt = 0
+            for j in range(j0, j1):
+                u = seg_u[seg[j]]
+                if tgt_stamp[u] != stamp:
+                    tgt_stamp[u] = stamp
+                    tgt_slot[u] = n_tgt
+                    n_tgt += 1
+            n_src = 0
+            for i in range(i0, i1):
+                s_i = score[i]
+                if s_i == -np.inf:
+                    continue
+                si, ai = seg[i], along[i]
+                rest_i = seg_len[si] - ai
+                v_i = seg_v[si]
+                if src_stamp[v_i] != stamp:      # scan this source's row once per epoch
+                    src_stamp[v_i] = stamp
+                    src_slot[v_i] = n_src
+                    for m in range(n_tgt):
+                        gap[n_src, m] = np.inf
+                    r = row_of[v_i]
+                    found = 0
+                    for e in range(row_start[r], row_start[r] + row_len[r]):
+                        if pool_dist[e] > lim[t] or found == n_tgt:
+                            break
+                        w = pool_node[e]
+                        if tgt_stamp[w] == stamp:
+                            gap[n_src, tgt_slot[w]] = pool_dist[e]
+                            found += 1
+                    n_src += 1
+                row = src_slot[v_i]
+                for j in range(j0, j1):
+                    excess = np.hypot(foot[j, 0] - foot[i, 0], foot[j, 1] - foot[i, 1]) - d_gc[t]
+                    if excess > 0 and s_i - excess / b_t <= score[j]:
+                        continue
+                    sj, aj = seg[j], along[j]
+                    if si == sj and aj >= ai:
+                        d = aj - ai
+                    else:
+                        d = rest_i + gap[row, tgt_slot[seg_u[sj]]] + aj
+                    if bt > 0:                   # backwards jitter on a slow or stopped car
+                        if si == sj and aj < ai:
+                            db = ai - aj
+                        else:
+                            rest = (seg_len[sj] - aj) + ai
+                            db = np.inf
+                            if rest <= bt:
+                                db = rest + route_gap(row_of, row_start, row_len, pool_node,
+                                                      pool_dist, seg_v[sj], seg_u[si], bt - rest)
+                        if db <= bt and db < d:
+                            d = db
+                    if not d <= fastest[t]:
+                        continue
+                    v = s_i - abs(d - d_gc[t]) / b_t
+                    if v > score[j]:
+                        score[j] = v
+                        back[j] = i
         best = -np.inf
-        for k in range(b0, b1):
-            if back[k] >= 0:
-                score[k] += em[k]
-            if score[k] > best:
-                best = score[k]
+        for j in range(j0, j1):
+            if back[j] >= 0:
+                score[j] += em[j]
+            if score[j] > best:
+                best = score[j]
         if best == -np.inf:          # no transition possible: restart the chain here
             restart[t + 1] = True
-            best = -np.inf
-            for k in range(b0, b1):
-                score[k] = em[k]
-                back[k] = -1
-                if score[k] > best:
-                    best = score[k]
-        for k in range(b0, b1):      # keep scores near 0 (no drift over long tracks)
-            score[k] -= best
-    # backtrack
+            for j in range(j0, j1):
+                score[j] = em[j]
+                back[j] = -1
+                if score[j] > best:
+                    best = score[j]
+        for j in range(j0, j1):      # keep scores near 0 (no drift over long tracks)
+            score[j] -= best
+
+
+@numba.njit(cache=True)
+def _backtrack(off, score, back):  # pragma: no cover - numba
+    """Best path: from the best candidate of the last epoch (and of the epoch before each
+    restart) along the back-pointers."""
+    n = len(off) - 1
     path = np.empty(n, np.int64)
     t = n - 1
     while t >= 0:
@@ -218,7 +262,7 @@ def _viterbi(em, off, pair_off, pi, pj, logtr, score, back):  # pragma: no cover
             path[t - 1] = back[path[t]]
             t -= 1
         t -= 1
-    return path, restart
+    return path
 
 
 class HmmMatcher:
@@ -228,7 +272,8 @@ class HmmMatcher:
     ----------
     graph : RoadGraph
     sigma : float
-        GNSS horizontal σ (m) where the fixes do not give one.
+        GNSS horizontal σ (m) where the fixes do not give one (:meth:`estimate_sigma` estimates
+        it from a track, :meth:`with_sigma` gives the matcher for it).
     beta : float, optional
         Transition scale (m); default ``max(3, sigma/2)``: with noisy fixes the straight-line
         distance between two fixes is itself uncertain by ~σ√2.
@@ -242,6 +287,19 @@ class HmmMatcher:
         Fastest plausible travel between fixes, m/s.
     max_gap : float
         A time gap longer than this (s) restarts the chain.
+    window : int
+        Fixes per processing window (candidate search and route distances); memory does not
+        grow with it beyond the window.
+    cache : RouteCache, optional
+        Route distances to share (a fleet on one map reuses them across tracks).
+
+    Notes
+    -----
+    The route distance between the two road nodes of a transition is searched up to
+    ``d_gc + 2 radius + 20 β`` (``d_gc``: straight-line distance between the fixes), and never
+    beyond what ``max_speed`` allows in the time between the fixes; a longer route is no
+    transition. Memory is O(N k) for N fixes (about 0.5 kB per fix with k = 16) plus a bounded
+    route store.
 
     Examples
     --------
@@ -250,49 +308,158 @@ class HmmMatcher:
     """
 
     def __init__(self, graph: RoadGraph, *, sigma=10.0, beta=None, radius=None, k=16,
-                 backtrack=None, max_speed=60.0, max_gap=120.0):
+                 backtrack=None, max_speed=60.0, max_gap=120.0, window=4096,
+                 cache: RouteCache | None = None):
         self.graph = graph
+        self._given = {"beta": beta, "radius": radius, "backtrack": backtrack}
+        self._set_sigma(sigma)
+        self.k = int(k)
+        self.max_speed = float(max_speed)
+        self.max_gap = float(max_gap)
+        self.window = int(window)
+        self.cache = cache if cache is not None else RouteCache(graph)
+        nn = graph.n_nodes
+        self._scratch = (np.full(nn, -1, np.int64), np.zeros(nn, np.int64),
+                         np.full(nn, -1, np.int64), np.zeros(nn, np.int64))
+        self._stamp = [0]                   # shared with the copies of with_sigma
+        self._g = (np.asarray(graph.seg_u, np.int64), np.asarray(graph.seg_v, np.int64),
+                   np.asarray(graph.seg_len, float))
+
+    def _set_sigma(self, sigma):
         self.sigma = float(sigma)
+        beta, radius, backtrack = (self._given[k] for k in ("beta", "radius", "backtrack"))
         self.beta = float(beta) if beta is not None else max(3.0, 0.5 * self.sigma)
         self.radius = float(radius) if radius is not None else float(np.clip(4 * self.sigma,
                                                                               30.0, 200.0))
-        self.k = int(k)
         self.backtrack = float(backtrack) if backtrack is not None else max(15.0, 3 * self.sigma)
-        self.max_speed = float(max_speed)
-        self.max_gap = float(max_gap)
+
+    def with_sigma(self, sigma) -> "HmmMatcher":
+        """The same matcher (graph, route store, settings given explicitly) for another GNSS σ:
+        the defaults that follow σ (β, radius, backtrack) follow it."""
+        import copy
+
+        m = copy.copy(self)
+        m._set_sigma(sigma)
+        return m
+
+    def estimate_sigma(self, xy) -> float:
+        """GNSS σ of a track from its fixes: ``1.4826 × median`` distance to the nearest road
+        (Newson & Krumm 2009, §4.1: the median absolute deviation of a Gaussian), within
+        [5, 50] m and rounded to 0.5 m. In a dense network the nearest road is not always the
+        driven one, so this leans low."""
+        return self.estimate_sigmas([xy])[0]
+
+    def estimate_sigmas(self, tracks_xy) -> list:
+        """:meth:`estimate_sigma` of several tracks (local metres) in one search."""
+        sizes = [len(np.atleast_2d(x)) for x in tracks_xy]
+        xy = np.concatenate([np.atleast_2d(np.asarray(x, float)).reshape(-1, 2)
+                             for x in tracks_xy])
+        c = self.graph.candidates(xy, 100.0, k=1, min_candidates=1, per_way=False)
+        d = np.full(len(xy), np.nan)
+        d[c.query] = c.dist
+        out = []
+        for a, b in zip(np.cumsum([0] + sizes[:-1]), np.cumsum(sizes)):
+            s = 1.4826 * float(np.nanmedian(d[a:b])) if b > a else self.sigma
+            out.append(float(np.clip(np.round(2 * s) / 2, 5.0, 50.0)))
+        return out
+
+    def _candidates(self, xy, radius):
+        """Candidates of all fixes, searched window by window: ``(off, seg, along, dist, foot)``."""
+        n = len(xy)
+        offs, segs, alongs, dists, feet = [np.zeros(1, np.int64)], [], [], [], []
+        total = 0
+        for a in range(0, n, self.window):
+            c = self.graph.candidates(xy[a:a + self.window], radius[a:a + self.window],
+                                      k=self.k, min_candidates=1, per_way=True)
+            offs.append(c.offsets(len(xy[a:a + self.window]))[1:] + total)
+            total += len(c)
+            segs.append(c.seg)
+            alongs.append(c.along)
+            dists.append(c.dist)
+            feet.append(c.foot)
+        return (np.concatenate(offs), np.concatenate(segs), np.concatenate(alongs),
+                np.concatenate(dists), np.concatenate(feet))
 
     def match(self, t, xy, sigma=None) -> MatchResult:
         """Match fixes given in local metres of the graph; see :class:`MatchResult`."""
+        return self.match_many([(t, xy, sigma)])[0]
+
+    def match_many(self, tracks, track_sigma=None) -> list:
+        """Match several tracks in one pass (one candidate search, one route-store update, one
+        Viterbi run with a restart at each track's first fix): the fixed costs of a call are
+        paid once, which is what makes short fleet tracks fast.
+
+        Parameters
+        ----------
+        tracks : list of (t, xy, sigma)
+            Times (s), local positions (m) and per-fix σ (or None) of each track.
+        track_sigma : list of float, optional
+            σ of each track where its fixes give none (default the matcher's); β, the search
+            radius and the backtrack follow it unless given explicitly.
+
+        Returns
+        -------
+        list of MatchResult
+        """
         t0 = time.perf_counter()
-        t = np.asarray(t, float)
-        xy = np.atleast_2d(np.asarray(xy, float))
-        n = len(t)
         g = self.graph
-        sig = np.full(n, self.sigma) if sigma is None else np.where(
-            np.isfinite(sigma) & (np.asarray(sigma, float) > 0), sigma, self.sigma)
-        cand = g.candidates(xy, self.radius, k=self.k, min_candidates=1, per_way=True)
-        off = cand.offsets(n)
-        em = -0.5 * (cand.dist / sig[cand.query]) ** 2
-        tb, pi, pj, pair_off = _pairs(off)
+        sizes = [len(np.asarray(tr[0])) for tr in tracks]
+        n = int(sum(sizes))
+        bounds = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
+        ts = np.concatenate([np.asarray(tr[0], float) for tr in tracks])
+        xy = np.concatenate([np.atleast_2d(np.asarray(tr[1], float)).reshape(-1, 2)
+                             for tr in tracks])
+        track_sigma = [self.sigma] * len(tracks) if track_sigma is None else track_sigma
+        per = [self.with_sigma(s) if s != self.sigma else self for s in track_sigma]
+        sig = np.empty(n)
+        for m, (a, b), tr in zip(per, zip(bounds[:-1], bounds[1:]), tracks):
+            given = None if tr[2] is None else np.asarray(tr[2], float)
+            sig[a:b] = m.sigma if given is None else np.where(
+                np.isfinite(given) & (given > 0), given, m.sigma)
+        radius = np.repeat([m.radius for m in per], sizes)
+        beta = np.repeat([m.beta for m in per], sizes)
+        backtrack = np.repeat([m.backtrack for m in per], sizes)
+        off, seg, along, dist, foot = self._candidates(xy, radius)
+        query = np.repeat(np.arange(n), np.diff(off))
+        em = -0.5 * (dist / sig[query]) ** 2
         d_gc = np.hypot(*(xy[1:] - xy[:-1]).T)
-        dt = np.diff(t)
-        # route distances beyond what the speed limit allows are never needed
-        fastest = self.max_speed * np.minimum(dt, self.max_gap) + 2 * self.radius
-        limit = min(float(np.max(d_gc, initial=0.0)) + 20 * self.beta + self.radius,
-                    float(np.max(fastest, initial=0.0)))
-        d_route = transition_route_distance(g, cand, pi, pj, backtrack=self.backtrack,
-                                            limit=limit)
-        logtr = -np.abs(d_route - d_gc[tb]) / self.beta
-        impossible = ~np.isfinite(d_route) | (d_route > fastest[tb]) | (dt[tb] > self.max_gap)
-        logtr[impossible] = -np.inf
-        score = np.empty(len(cand))
-        back = np.empty(len(cand), np.int64)
-        path, restart = _viterbi(em, off, pair_off, pi, pj, logtr, score, back)
-        foot = cand.foot[path]
+        dt = np.diff(ts)
+        dt[bounds[1:-1] - 1] = np.inf          # a new track: no transition, the chain restarts
+        r_ep = np.maximum(radius[1:], radius[:-1]) if n > 1 else np.zeros(0)
+        fastest = self.max_speed * np.minimum(dt, self.max_gap) + 2 * r_ep
+        lim = np.minimum(d_gc + 2 * r_ep + 20 * beta[:-1], fastest)
+        score = np.empty(len(seg))
+        back = np.full(len(seg), -1, np.int64)
+        restart = np.zeros(n, bool)
+        restart[0] = True
+        score[off[0]:off[1]] = em[off[0]:off[1]]
+        seg_u, seg_v, seg_len = self._g
+        for a in range(0, n - 1, self.window):
+            b = min(a + self.window, n - 1)
+            # sources: candidates of epochs a .. b-1 (forward) and a+1 .. b (backwards)
+            self.cache.ensure(
+                np.concatenate([seg_v[seg[off[a]:off[b]]], seg_v[seg[off[a + 1]:off[b + 1]]]]),
+                np.concatenate([np.repeat(lim[a:b], np.diff(off[a:b + 1])),
+                                np.repeat(backtrack[a + 1:b + 1], np.diff(off[a + 1:b + 2]))]))
+            _forward(a, b, off, seg, along, foot, em, d_gc, dt, lim, fastest, seg_u, seg_v,
+                     seg_len, self.cache.arrays, beta, backtrack, self.max_gap, score, back,
+                     restart, self._scratch, self._stamp[0])
+        self._stamp[0] += n + 1
+        path = _backtrack(off, score, back)
+        mseg, malong = seg[path], along[path]
+        foot = foot[path]
         lat, lon = g.to_geodetic(foot[:, 0], foot[:, 1])
-        in_radius = np.bincount(cand.query[cand.dist <= self.radius], minlength=n) > 0
-        return MatchResult(t, foot, lat, lon, cand.seg[path], cand.along[path],
-                           cand.dist[path], in_radius, restart, time.perf_counter() - t0)
+        in_radius = np.bincount(query[dist <= radius[query]], minlength=n) > 0
+        way = g.seg_way[mseg]
+        moved = dist[path]
+        seconds = time.perf_counter() - t0
+        out = []
+        for m, a, b in zip(per, bounds[:-1], bounds[1:]):
+            sl = slice(a, b)
+            out.append(MatchResult(ts[sl], foot[sl], lat[sl], lon[sl], mseg[sl], malong[sl],
+                                   moved[sl], in_radius[sl], restart[sl],
+                                   seconds * (b - a) / max(n, 1), way[sl], m.sigma))
+        return out
 
     def match_geodetic(self, t, lat, lon, sigma=None) -> MatchResult:
         """Match fixes given as WGS-84 latitude and longitude (rad)."""

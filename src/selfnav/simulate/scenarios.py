@@ -22,7 +22,6 @@ alone.
 from __future__ import annotations
 
 import copy
-import shutil
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -196,6 +195,35 @@ def _gnss_model(g, truth, rng) -> sensors.GnssModel:
                              spike_sigma=float(g["spike_sigma_m"]), datum=str(g["datum"]))
 
 
+#: Coarsest IMU sample interval that still follows a moving vehicle, s.
+MAX_MOVING_DT = 0.1
+
+
+def check_scenario(cfg: dict) -> None:
+    """Refuse, one line each, scenario values no sensor or place has: a non-positive length,
+    sample interval, rate or σ, an IMU interval too coarse for a moving vehicle, fewer than
+    100 samples, a latitude outside ±90° or a longitude outside −180..360°."""
+    sc, g = cfg["scenario"], cfg.get("gnss", {})
+    T, dt = float(sc["duration"]), float(sc["dt"])
+    if not T > 0 or not dt > 0:
+        raise SelfnavError(f"scenario duration and dt must be positive (got {T:g} s, {dt:g} s)")
+    if sc["kind"] in ("ship", "aircraft", "car") and dt > MAX_MOVING_DT:
+        raise SelfnavError(f"dt = {dt:g} s ({1 / dt:.3g} Hz) cannot follow a moving {sc['kind']}: "
+                           f"use an IMU interval of at most {MAX_MOVING_DT:g} s")
+    if T / dt < 100:
+        raise SelfnavError(f"duration {T:g} s at dt = {dt:g} s gives {T / dt:.0f} samples: at "
+                           "least 100 are needed")
+    lat, lon = float(sc.get("lat_deg", 0.0)), float(sc.get("lon_deg", 0.0))
+    if not -90.0 <= lat <= 90.0:
+        raise SelfnavError(f"scenario lat_deg = {lat:g} is not a latitude (-90..90)")
+    if not -180.0 <= lon <= 360.0:
+        raise SelfnavError(f"scenario lon_deg = {lon:g} is not a longitude (-180..360)")
+    for key in ("sigma_m", "rate_hz"):
+        v = g.get(key)
+        if v is not None and not float(v) > 0:
+            raise SelfnavError(f"gnss.{key} = {v} must be positive")
+
+
 def simulate(spec, *, seed: int = 0, grade: str | None = None, duration: float | None = None,
              dt: float | None = None, progress=None) -> Simulation:
     """Run a scenario: trajectory, exact inverse strapdown, IMU/GNSS/magnetometer errors.
@@ -216,8 +244,7 @@ def simulate(spec, *, seed: int = 0, grade: str | None = None, duration: float |
         cfg["scenario"]["duration"] = float(duration)
     if dt is not None:
         cfg["scenario"]["dt"] = float(dt)
-    if not cfg["scenario"]["duration"] > 0 or not cfg["scenario"]["dt"] > 0:
-        raise SelfnavError("scenario duration and dt must be positive")
+    check_scenario(cfg)
     model = sensors.imu_grade(cfg["imu"]["grade"])   # fail early on a bad grade
     ss = np.random.SeedSequence(int(seed))
     s_motion, s_imu, s_gnss, s_mag = ss.spawn(4)
@@ -284,12 +311,30 @@ def _interp_attitude(truth, t):
 def write_simulation(sim: Simulation, out_dir) -> list[Path]:
     """Write ``imu.csv``, ``truth.csv``, ``gnss.csv``, ``gnss_errors.csv``, ``mag.csv``,
     ``odometer.csv`` (``t, speed_mps``, when simulated) and the map (DESIGN §6 columns), each
-    with a ``# simulated ...`` comment line; returns the paths."""
-    from selfnav.io.csvio import write_csv
-    from selfnav.io.trajectory import write_truth
+    with a ``# simulated ...`` comment line; returns the paths.
+
+    The files are written as one set (:func:`selfnav.io.output.atomic_folder`): into a folder
+    that holds an older simulation, an interrupt leaves the old set or the new one, never a
+    mix; other files in the folder are left alone."""
+    from selfnav.io.output import atomic_folder
 
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    with atomic_folder(out, owned=SIMULATION_FILES) as tmp:
+        names = _write_simulation_files(sim, tmp)
+    return [out / n for n in names]
+
+
+#: The files :func:`write_simulation` may write (an older set's files are replaced as a whole).
+SIMULATION_FILES = ("imu.csv", "mag.csv", "truth.csv", "gnss.csv", "gnss_errors.csv", "odometer.csv",
+                    "kotka_karhula.osm.pbf", "helsinki_centre.osm.pbf", "MAP_ATTRIBUTION.txt")
+
+
+def _write_simulation_files(sim: Simulation, out: Path) -> list[str]:
+    """Write the files of :func:`write_simulation` into the folder ``out``; their names."""
+    from selfnav.io.csvio import write_csv
+    from selfnav.io.output import atomic_copy, atomic_write_text
+    from selfnav.io.trajectory import write_truth
+
     sc = sim.config["scenario"]
     tag = (f"simulated by selfnav: scenario {sc['name']} ({sc['kind']}), seed "
            f"{sim.imu.meta.get('seed')}, IMU grade {sim.config['imu']['grade']}")
@@ -338,11 +383,9 @@ def write_simulation(sim: Simulation, out_dir) -> list[Path]:
             fmt={"t": "%.6f", "outlier": "%d", "spike": "%d"}))
     if sim.map_path is not None:
         dst = out / Path(sim.map_path).name
-        if Path(sim.map_path).resolve() != dst.resolve():
-            shutil.copyfile(sim.map_path, dst)
-        paths.append(dst)
-        (out / "MAP_ATTRIBUTION.txt").write_text(
+        paths.append(atomic_copy(sim.map_path, dst))
+        paths.append(atomic_write_text(
+            out / "MAP_ATTRIBUTION.txt",
             f"{dst.name}: map data (c) OpenStreetMap contributors, Open Database License (ODbL) "
-            "1.0, https://www.openstreetmap.org/copyright\n", encoding="utf-8")
-        paths.append(out / "MAP_ATTRIBUTION.txt")
-    return paths
+            "1.0, https://www.openstreetmap.org/copyright\n"))
+    return [Path(p).name for p in paths]

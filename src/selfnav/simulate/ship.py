@@ -5,38 +5,19 @@ The attitude is given analytically, so the body rates are exact:
 
     ω_ib^b = ω_nb^b + C_n^b (ω_ie^n + ω_en^n)
 
-with ``ω_nb^b`` from the Euler-angle rates by seed 002 (6) (ψ = −heading) and, in ENU,
-``ω_ie^n = Ω (0, cos φ, sin φ)``, ``ω_en^n = (−v_N/R_φ, v_E/R_λ, v_E tan φ / R_λ)``.
+with ``ω_nb^b`` from the Euler-angle rates by seed 002 (6) (ψ = −heading,
+:func:`selfnav.attitude.euler_rates_to_body`) and ``ω_in^n = ω_ie^n + ω_en^n`` from
+:func:`selfnav.earth.nav_rate_n`. These are *instantaneous* rates; the simulator's IMU files
+(:func:`selfnav.simulate.inverse.imu_from_trajectory`) hold interval means.
 """
 from __future__ import annotations
 
 import numpy as np
 
 from selfnav import attitude as att
-from selfnav.earth import OMEGA_EARTH, radii
+from selfnav import earth
+from selfnav.earth import radii
 from selfnav.types import Trajectory
-
-
-def euler_rates_to_body(roll, pitch, roll_rate, pitch_rate, heading_rate):
-    """``ω_nb^b`` from Euler angles and their rates, seed 002 (6) with ψ̇ = −heading rate.
-
-    Returns (N, 3) rad/s in body RFU axes.
-    """
-    g, th = np.asarray(roll, float), np.asarray(pitch, float)
-    gd, thd, psid = np.asarray(roll_rate, float), np.asarray(pitch_rate, float), -np.asarray(
-        heading_rate, float)
-    return np.stack([
-        thd * np.cos(g) - psid * np.cos(th) * np.sin(g),   # seed 002, (6) row 1
-        psid * np.sin(th) + gd,                             # row 2
-        thd * np.sin(g) + psid * np.cos(th) * np.cos(g),    # row 3
-    ], axis=-1)
-
-
-def transport_rate_n(lat, velocity_n, h=0.0):
-    """``ω_en^n`` in ENU for a velocity over the WGS-84 ellipsoid, rad/s (N, 3)."""
-    r_phi, r_lam = radii(lat, h)
-    ve, vn = velocity_n[..., 0], velocity_n[..., 1]
-    return np.stack([-vn / r_phi, ve / r_lam, ve * np.tan(lat) / r_lam], axis=-1)
 
 
 def ship_trajectory(duration=1800.0, dt=0.01, lat0=np.radians(45.0), lon0=np.radians(30.0), *,
@@ -98,7 +79,7 @@ def ship_trajectory(duration=1800.0, dt=0.01, lat0=np.radians(45.0), lon0=np.rad
                       source=f"simulated ship: {speed - speed_amp:g}-{speed + speed_amp:g} m/s, "
                              f"course {course_deg:g} deg, roll/pitch/yaw ±{roll_amp_deg:g}/"
                              f"{pitch_amp_deg:g}/{yaw_amp_deg:g} deg")
-    traj.omega_nb_b = euler_rates_to_body(roll, pitch, rates[:, 0], rates[:, 1], rates[:, 2])
+    traj.omega_nb_b = att.euler_rates_to_body(roll, pitch, rates[:, 0], rates[:, 1], rates[:, 2])
     return traj
 
 
@@ -139,12 +120,9 @@ def exact_body_rates(traj: Trajectory):
     w_nb = getattr(traj, "omega_nb_b", None)
     if w_nb is None:
         w_nb = _numeric_omega_nb_b(traj)
-    w_in = OMEGA_EARTH * np.stack([np.zeros_like(traj.lat), np.cos(traj.lat), np.sin(traj.lat)], -1)
-    w_in = w_in + transport_rate_n(traj.lat, traj.velocity_n, traj.h)
-    return w_nb + np.einsum("nij,nj->ni", traj.C_nb, w_in)
+    return w_nb + np.einsum("nij,nj->ni", traj.C_nb, nav_rate_n(traj))
 
 
 def nav_rate_n(traj: Trajectory):
     """True ``ω_in^n = ω_ie^n + ω_en^n`` along a trajectory (N, 3), ENU."""
-    w_in = OMEGA_EARTH * np.stack([np.zeros_like(traj.lat), np.cos(traj.lat), np.sin(traj.lat)], -1)
-    return w_in + transport_rate_n(traj.lat, traj.velocity_n, traj.h)
+    return earth.nav_rate_n(traj.lat, traj.velocity_n, traj.h)

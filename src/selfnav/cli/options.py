@@ -1,0 +1,176 @@
+"""Options shared by the commands, defined once: the same name, help and choices everywhere.
+
+Each is an ``Annotated`` type (or a factory of one where the help names what the command
+writes). Choices are real choices: ``--help`` lists them and a bad value is a one-line usage
+error. Flags are positive (``--smooth``, ``--window-test/--no-window-test``).
+
+The choice lists are spelled here (the command line must start without importing numpy and
+scipy); ``tests/test_cli_options.py`` checks that they equal the library's
+(:data:`selfnav.io.readers.IMU_FORMATS`, :data:`selfnav.datum.DATUMS`,
+:data:`selfnav.sensors.GRADE_NAMES`, ...).
+"""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated, Callable, Optional
+
+import typer
+
+IMU_FORMATS = ("auto", "csv", "psins", "psins-csv", "rtklibexplorer", "kfgins")
+GNSS_FORMATS = ("auto", "csv", "pos", "nmea", "psins-avp")
+DATUMS = ("wgs84", "pz90.11", "pz90", "sk42")
+GRADES = ("navigation", "tactical", "industrial", "consumer")
+SIM_GRADES = (*GRADES, "perfect")
+NAV_GRADES = ("auto", *GRADES)
+
+
+def checked_choice(choices, normalize: Callable[[str], str] | None = None):
+    """A typer callback accepting one of ``choices`` (case-insensitive; ``normalize`` maps
+    aliases onto a choice or raises) and returning it as a plain ``str``."""
+
+    def check(value):
+        if value is None:
+            return None
+        key = str(value).strip().lower()
+        if normalize is not None:
+            try:
+                key = normalize(key)
+            except Exception:
+                key = None
+        if key not in choices:
+            raise typer.BadParameter(f"'{value}' is not one of {', '.join(choices)}")
+        return key
+
+    return check
+
+
+def choice_option(*decls, choices, help: str, normalize=None, hidden: bool = False):
+    """``typer.Option`` of a choice: ``--help`` shows ``[a|b|c]``, a bad value is one line."""
+    return typer.Option(*decls, metavar="[" + "|".join(choices) + "]", help=help, hidden=hidden,
+                        callback=checked_choice(choices, normalize))
+
+
+def datum_key_lazy(name: str) -> str:
+    from selfnav.datum import datum_key  # lazily: only the commands that take a datum pay
+
+    return datum_key(name)
+
+
+# ---------------------------------------------------------------- inputs
+ImuFile = Annotated[Path, typer.Option(
+    "--imu", help="IMU file: native CSV (t, wx, wy, wz, fx, fy, fz; s, rad/s, m/s²), PSINS "
+                  ".imu, rtklibexplorer CSV with its .tag, KF-GINS (see --imu-format).")]
+ImuArgument = Annotated[Path, typer.Argument(
+    help="IMU record (native CSV, PSINS .imu, ...; see --imu-format).")]
+GnssFile = Annotated[Path, typer.Option(
+    "--gnss", help="GNSS fixes: native CSV (t, lat_deg, lon_deg, h_m[, sigma_m]), RTKLIB .pos "
+                   "or NMEA (see --gnss-format).")]
+OptionalGnssFile = Annotated[Optional[Path], typer.Option(
+    "--gnss", help="GNSS fixes: native CSV (t, lat_deg, lon_deg, h_m[, sigma_m, ve, vn, vu]), "
+                   "RTKLIB .pos, NMEA or a PSINS avp CSV (see --gnss-format); optional with "
+                   "--init.")]
+MapFile = Annotated[Optional[Path], typer.Option(
+    "--map", help="Road map: OpenStreetMap .osm or .osm.pbf.")]
+ImuFormat = Annotated[str, choice_option(
+    "--imu-format", choices=IMU_FORMATS,
+    help="Format of the IMU file; auto: by name (.imu PSINS, a .tag beside it rtklibexplorer, "
+         "else CSV). rtklibexplorer applies upstream's -0.125 s time offset.")]
+#: the old spelling of ``--imu-format`` (hidden; still accepted)
+ImuFormatOld = Annotated[Optional[str], choice_option(
+    "--format", choices=IMU_FORMATS, help="Same as --imu-format.", hidden=True)]
+GnssFormat = Annotated[str, choice_option(
+    "--gnss-format", choices=GNSS_FORMATS,
+    help="Format of the GNSS file; auto: by extension (.pos RTKLIB, .nmea/.nma/.gga NMEA, "
+         "else CSV).")]
+GnssDatum = Annotated[str, choice_option(
+    "--gnss-datum", choices=DATUMS, normalize=datum_key_lazy,
+    help="Datum of the GNSS file's coordinates (converted to WGS-84 on reading).")]
+OutDatum = Annotated[str, choice_option(
+    "--out-datum", choices=DATUMS, normalize=datum_key_lazy,
+    help="Datum of the coordinates written.")]
+Grade = Annotated[str, choice_option(
+    "--grade", choices=GRADES, help="IMU grade: its noise model (selfnav.sensors.GRADES).")]
+NavGrade = Annotated[str, choice_option(
+    "--grade", choices=NAV_GRADES,
+    help="IMU noise prior: auto (measured from the data, the consumer preset where nothing is "
+         "still) or a grade of selfnav.sensors.GRADES; where the data is noisier than a preset, "
+         "the measured noise wins and a warning says so.")]
+SimGrade = Annotated[Optional[str], choice_option(
+    "--grade", choices=SIM_GRADES,
+    help="IMU grade of the simulated sensors (perfect: no errors); default the scenario's.")]
+
+# ---------------------------------------------------------------- outputs
+Json = Annotated[bool, typer.Option(
+    "--json", help="Print one JSON object on stdout (nothing else there; notes go to stderr).")]
+
+
+def out_file(what: str, required: bool = True):
+    """``--out FILE``: the help says what the file holds and how it is written."""
+    return Annotated[Path if required else Optional[Path], typer.Option(
+        "--out", help=f"{what} A FILE, written atomically (through a symlink, never over a "
+                      "device); missing parent folders are created.")]
+
+
+def out_folder(what: str):
+    """``--out DIR``: the help says what goes in the folder."""
+    return Annotated[Path, typer.Option(
+        "--out", help=f"{what} A FOLDER (created with its parents); the set of files is "
+                      "replaced whole, other files in it are left alone.")]
+
+
+# ---------------------------------------------------------------- numbers with a range
+def _in_range(what: str, lo: float, hi: float):
+    def check(value):
+        if value is not None and not lo <= value <= hi:
+            raise typer.BadParameter(f"{value:g} is not a {what} in degrees ({lo:g}..{hi:g})")
+        return value
+
+    return check
+
+
+#: Callbacks for options that take a latitude / longitude in degrees.
+check_latitude_deg = _in_range("latitude", -90.0, 90.0)
+check_longitude_deg = _in_range("longitude", -180.0, 360.0)
+
+
+def latitude_deg(*decls, help: str):
+    """A latitude in degrees: -90 to 90."""
+    return Annotated[float, typer.Option(*decls, callback=check_latitude_deg, help=help)]
+
+
+def longitude_deg(*decls, help: str):
+    """A longitude in degrees: -180 to 360."""
+    return Annotated[float, typer.Option(*decls, callback=check_longitude_deg, help=help)]
+
+
+def positive(*decls, help: str, optional: bool = False):
+    """A number that must be > 0 (σ, a length, a duration): a bad value is one line."""
+    return Annotated[Optional[float] if optional else float, typer.Option(
+        *decls, callback=_positive, help=help)]
+
+
+def _positive(value):
+    if value is not None and not value > 0:
+        raise typer.BadParameter(f"must be positive (got {value:g})")
+    return value
+
+
+def at_least(minimum: int, *decls, help: str, optional: bool = False):
+    """An integer that must be at least ``minimum``: a bad value is one line."""
+    def check(value):
+        if value is not None and value < minimum:
+            raise typer.BadParameter(f"must be at least {minimum} (got {value})")
+        return value
+
+    return Annotated[Optional[int] if optional else int, typer.Option(
+        *decls, callback=check, help=help)]
+
+
+# ---------------------------------------------------------------- Dask
+Workers = at_least(0, "--workers", help="Local Dask workers (processes, one thread each); 0: "
+                                        "in this process without Dask.")
+Scheduler = Annotated[Optional[str], typer.Option(
+    "--scheduler", metavar="ADDRESS", help="Address of an existing Dask scheduler (tcp://host:8786); "
+                        "--workers is then ignored.")]
+Seed = Annotated[int, typer.Option("--seed", help="Random seed: the same seed gives the same "
+                                                  "result.")]
