@@ -23,14 +23,14 @@ from selfnav.io.readers import read_gnss, read_imu, read_imu_positions
 from selfnav.latitude import LatitudeResult
 from selfnav.latitude import estimate_latitude as _estimate_latitude
 from selfnav.latitude import estimate_latitude_multiposition
-from selfnav.roads.aid import EkfRoadAid
+from selfnav.roads.aid import EkfRoadAid, start_on_roads
 from selfnav.roads.graph import RoadGraph, read_roads
 from selfnav.io.fleet import Fleet, read_fleet
 from selfnav.roads.fleet import (FleetRun, MatchParams, match_files, match_track,
                                  match_tracks)
 from selfnav.seed004 import SeedConfig, run_seed
 from selfnav.solution import Solution, read_solution
-from selfnav.types import GnssData, ImuData, Trajectory
+from selfnav.types import GnssData, ImuData, OdometerData, Trajectory
 
 METHODS = ("ekf", "seed")
 #: a run that leaves more of its fixes unused than this warns (one line)
@@ -116,7 +116,7 @@ def navigate(imu: ImuData, gnss: GnssData | None, roads=None, *, method: str = "
              window_test: bool = True, nhc: bool = True, shadows: bool = True,
              mount_states: bool = False, scale_factors: bool | None = None,
              matcher: str = "seed", ins_datum: str = "sk42", declination_deg: float | None = None,
-             init=None, progress=None) -> Solution:
+             init=None, progress=None, odometer: OdometerData | None = None) -> Solution:
     """Navigate a vehicle with an IMU and GNSS, and optionally a road map.
 
     With the defaults the EKF calibrates itself (DESIGN §10; :mod:`selfnav.ins.calibrate`):
@@ -156,6 +156,10 @@ def navigate(imu: ImuData, gnss: GnssData | None, roads=None, *, method: str = "
         from GNSS; then ``gnss`` may be None (free inertial navigation with the vehicle
         constraints).
     progress : callable(fraction), optional
+    odometer : OdometerData, optional
+        Wheel speed on the IMU's clock (shifted with the IMU stamps): the EKF adds the
+        scale-factor state and a forward-speed update; the seed loop takes its travel (13)
+        from it, scaled by a factor it learns from the healthy periods.
 
     Returns
     -------
@@ -179,7 +183,9 @@ def navigate(imu: ImuData, gnss: GnssData | None, roads=None, *, method: str = "
             raise SelfnavError("--method seed needs a road map: --map ROADS (.osm/.osm.pbf)")
         cfg = SeedConfig(matcher=matcher, ins_datum=ins_datum,
                          declination=None if declination_deg is None else np.radians(declination_deg))
-        r = run_seed(imu, gnss, graph, cfg, progress=progress)
+        odo = None if odometer is None else odometer.shifted(
+            float(imu.meta.get("time_offset_s", 0.0)))
+        r = run_seed(imu, gnss, graph, cfg, progress=progress, odometer=odo)
         stats = {k: v for k, v in r.stats.items() if k != "t_start"}
         # the seed loop has no covariance
         return Solution(r.trajectory, None, {}, stats, f"seed ({matcher})", r)
@@ -205,11 +211,14 @@ def navigate(imu: ImuData, gnss: GnssData | None, roads=None, *, method: str = "
         imu = imu.shifted(float(imu_time_offset_s))
         applied += float(imu_time_offset_s)
     cfg, measured, notes = calibrate.calibrated_config(cfg, imu, gnss)
+    if odometer is not None:
+        cfg = cfg.updated(odometer=True)
     if notes and str(grade).lower() != "auto" and config is None:
         warnings.warn(f"the IMU is noisier than the '{grade}' preset says ({'; '.join(notes)}): "
                       "using the measured noise", SelfnavWarning, stacklevel=2)
     # an IMU gap longer than a few samples ends a segment: each is navigated on its own and
     # re-initialised from GNSS after the gap; no row stands inside a gap
+    odo_all = None if odometer is None else odometer.shifted(applied)
     results, skipped = [], []
     segments = imu_segments(imu)
     for n_seg, sl in enumerate(segments):
@@ -224,6 +233,10 @@ def navigate(imu: ImuData, gnss: GnssData | None, roads=None, *, method: str = "
         try:
             if init is not None and n_seg == 0:
                 start = initial_state(init, part, cfg)
+            elif graph is not None:
+                # start only after a run of fixes that look healthy without an INS and also
+                # lie on the map's roads (a smooth drift from power-on looks healthy)
+                start = start_on_roads(part, g_part, graph, cfg)
             else:
                 # start only after a run of fixes that look healthy without an INS (an outlier
                 # window at start-up must not seed the navigator hundreds of metres off)
@@ -233,8 +246,10 @@ def navigate(imu: ImuData, gnss: GnssData | None, roads=None, *, method: str = "
             continue
         prog = None if progress is None else (
             lambda x, a=n_seg, n=len(segments): progress((a + x) / n))
+        odo = None if odo_all is None else odo_all.select(
+            (odo_all.t >= span[0]) & (odo_all.t <= span[1]))
         results.append(ins.run_filter(part, g_part, cfg, init=start, smooth=smooth,
-                                      progress=prog, road_aid=aid))
+                                      progress=prog, road_aid=aid, odometer=odo))
     if not results:
         if len(segments) == 1:
             raise SelfnavError(skipped[0].split(": ", 1)[-1])
@@ -261,6 +276,8 @@ def navigate(imu: ImuData, gnss: GnssData | None, roads=None, *, method: str = "
     stats["noise"] = {"grade": cfg.imu.grade, "arw_deg_per_sqrt_h": float(np.degrees(cfg.imu.arw) * 60),
                       "vrw_m_per_s_per_sqrt_h": float(cfg.imu.vrw * 60),
                       "still_s": measured.still_s, "raised": notes}
+    if res.odometer_scale is not None and len(res.odometer_scale):
+        stats["odometer_scale_factor"] = float(res.odometer_scale[-1])
     if res.mounting is not None and len(res.mounting):
         stats["mounting_deg"] = [float(x) for x in np.degrees(res.mounting[-1])]
     st = res.fix_log["status"]

@@ -58,6 +58,9 @@ class Pair:
     defaults : dict
         Default parameters; the user's overrides must use the same keys.
     description : str
+    summarize : callable, optional
+        ``summarize(table) -> dict``: the pair's own summary of the per-run table (e.g.
+        distributions), merged into the campaign's.
     """
 
     name: str
@@ -65,15 +68,16 @@ class Pair:
     unit: str
     defaults: dict = field(default_factory=dict)
     description: str = ""
+    summarize: Callable[[dict], dict] | None = None
 
 
 REGISTRY: dict[str, Pair] = {}
 
 
 def register_pair(name: str, run: Callable[[int, dict], dict], *, unit: str, defaults=None,
-                  description: str = "") -> Pair:
+                  description: str = "", summarize=None) -> Pair:
     """Register a (scenario, method) pair under ``name``; returns it."""
-    p = Pair(name, run, unit, dict(defaults or {}), description)
+    p = Pair(name, run, unit, dict(defaults or {}), description, summarize)
     REGISTRY[name] = p
     return p
 
@@ -328,6 +332,8 @@ def run_montecarlo(name: str, runs: int, *, seed: int = 0, params: dict | None =
     t1 = time.perf_counter()
     table = _to_table(rows)
     summary = summarize(table["error"], table["sigma"], table.get("bound"))
+    if pair.summarize is not None:
+        summary.update(pair.summarize(table))
     return MonteCarloResult(name, pair.unit, p, seed, table, summary, nw, mode, t1 - t0, t1 - tc)
 
 

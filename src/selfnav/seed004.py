@@ -51,6 +51,14 @@ Gaps the seed leaves, filled and said so here:
 
 ``matcher="mht"`` replaces step 5 by the road-constrained particle matcher of
 :mod:`selfnav.roads.particles` (driven by the same ΔS and course); everything else stays.
+
+**Odometer** (beyond the seed, optional): with wheel speed the mean speed of (11) is the
+odometer's over the period, divided by ``1 + k̂``, and the speed of the reset (14) is the
+odometer's at the end of the period (the direction stays (14)'s). ``k̂``, the odometer's
+scale-factor error, is fitted by least squares to the healthy fixes: their displacement from
+the first healthy fix against the odometer's travel integrated along the road course since,
+``Δz ≈ Δo / (1 + k)`` (once ``odo_learn_m`` metres are behind; the loop has no filter state for
+it, and the identified positions, which follow the odometer's own prediction, cannot tell).
 """
 from __future__ import annotations
 
@@ -88,6 +96,7 @@ class SeedConfig:
     velocity_reset: str = "end"       # "end" (mid-period velocity carried to the end) or "literal"
     velocity_kick: float = 3.0        # m/s: most an identification correction changes V ("end")
     drift_window: int = 0             # healthy periods averaged for the speed drift (0: off)
+    odo_learn_m: float = 300.0        # identified metres before the odometer scale is learnt
     declination: float | None = None  # rad; None: from the field model at the start
     mht: MatcherConfig = field(default_factory=MatcherConfig)
 
@@ -164,7 +173,7 @@ def _course_mean(mag_b, roll, pitch, declination):
 
 
 def run_seed(imu, gnss, graph: RoadGraph, cfg: SeedConfig | None = None, *, gnss_datum="wgs84",
-             init=None, progress=None) -> SeedResult:
+             init=None, progress=None, odometer=None) -> SeedResult:
     """Run the seed 004 navigator over a record.
 
     Parameters
@@ -179,6 +188,8 @@ def run_seed(imu, gnss, graph: RoadGraph, cfg: SeedConfig | None = None, *, gnss
     init : dict, optional
         Initial state (``t, lat, lon, h, velocity_n, C_nb``, WGS-84); default
         :func:`selfnav.ins.init_from_gnss`.
+    odometer : OdometerData, optional
+        Wheel speed on the IMU's clock (module docstring).
     """
     cfg = cfg or SeedConfig()
     if cfg.matcher not in ("seed", "mht"):
@@ -240,6 +251,10 @@ def run_seed(imu, gnss, graph: RoadGraph, cfg: SeedConfig | None = None, *, gnss
     reacq = 0
     drift = []           # speed corrections of the healthy periods, m/s
     last_fix = []        # the last 22 fixes (map plane), for the INS-free health test
+    odo_k = 0.0          # odometer scale-factor error estimate
+    odo_vec = np.zeros(2)  # odometer travel integrated along the road course, m
+    odo_ref = None       # (odometer vector, fix) of the first healthy fix
+    odo_sum = np.zeros(2)  # Σ Δz·Δo and Σ Δo·Δo over the healthy fixes
     for n_fix, k in enumerate(fix_idx):
         j = int(np.searchsorted(imu.t, gnss.t[k], side="right"))
         if j - i_imu < 1:
@@ -250,6 +265,10 @@ def run_seed(imu, gnss, graph: RoadGraph, cfg: SeedConfig | None = None, *, gnss
         k_m = j - i_imu
         # (11) erratum reading: the mean fast-loop speed over the period (horizontal)
         dV = float(np.mean(np.hypot(tr.velocity_n[:, 0], tr.velocity_n[:, 1])))
+        if odometer is not None:     # the wheel speed over the period, scale corrected
+            v_odo = np.interp(tr.t, odometer.t, odometer.speed_mps)
+            dV_raw = float(np.mean(v_odo))
+            dV = dV_raw / (1.0 + odo_k)
         roll_b, pitch_b, hdg_b = att.euler_from_dcm_nb(tr.C_nb)
         # (12): mean magnetic course over the period (true: + declination)
         K_ins = float(np.arctan2(np.mean(np.sin(hdg_b)), np.mean(np.cos(hdg_b))) % (2 * np.pi))
@@ -378,6 +397,22 @@ def run_seed(imu, gnss, graph: RoadGraph, cfg: SeedConfig | None = None, *, gnss
             elif not ok and len(drift) >= 10 and s_new > 1.0:
                 s_fix = max(s_ins + float(np.mean(drift)), 0.0)
                 vE, vN = vE * s_fix / s_new, vN * s_fix / s_new
+        if odometer is not None:
+            odo_vec += T_M * dV_raw * np.array([np.sin(K_road), np.cos(K_road)])
+            if ok and n_fix > 0:     # learn the scale from the healthy fixes
+                if odo_ref is None:
+                    odo_ref = (odo_vec.copy(), np.asarray(z, float).copy())
+                else:
+                    d_o, d_z = odo_vec - odo_ref[0], np.asarray(z, float) - odo_ref[1]
+                    odo_sum += (float(d_z @ d_o), float(d_o @ d_o))
+                    if np.hypot(*d_o) > cfg.odo_learn_m and odo_sum[0] > 0:
+                        odo_k = float(np.clip(odo_sum[1] / odo_sum[0] - 1.0, -0.1, 0.1))
+            s_end = float(v_odo[-1]) / (1.0 + odo_k)
+            s_new = float(np.hypot(vE, vN))
+            if s_new > 0.5:
+                vE, vN = vE * s_end / s_new, vN * s_end / s_new
+            elif s_end > 0.5:
+                vE, vN = s_end * np.sin(K_road), s_end * np.cos(K_road)
         if n_fix == 0:   # the first step starts from the alignment, not from an identified fix
             vE, vN, vU = (float(x) for x in tr.velocity_n[-1])
         sp = float(np.sqrt(vE * vE + vN * vN + vU * vU))
@@ -407,6 +442,8 @@ def run_seed(imu, gnss, graph: RoadGraph, cfg: SeedConfig | None = None, *, gnss
              "k_m": int(np.median(diag["k_m"])), "matcher": cfg.matcher,
              "declination_deg": float(np.degrees(decl)),
              "reseeds": int(pf.reseeds) if pf is not None else reacq}
+    if odometer is not None:
+        stats["odometer_scale_factor"] = odo_k
     return SeedResult(traj, diag, stats)
 
 

@@ -419,19 +419,22 @@ def outlier_errors(kind, n, dt, sigma, tau, rng):
 
 
 def random_outlier_windows(t0, t1, count, rng, *, max_duration=300.0, sigma=200.0,
-                           kinds=("white", "gm"), startup=False):
+                           kinds=("white", "gm"), startup=False, min_duration=None):
     """``count`` non-overlapping outlier windows placed uniformly in ``[t0, t1]``.
 
-    Durations are uniform in 20-100 % of ``max_duration`` (at most half the span).
+    Durations are uniform in ``[min_duration, max_duration]`` (``min_duration`` None: 20 % of
+    ``max_duration``; both at most half the span); the kind is drawn from ``kinds``.
 
     ``startup=True`` puts the first window at ``t0`` (the receiver is wrong from power-on).
     """
     rng = np.random.default_rng(rng)
     max_duration = min(float(max_duration), 0.5 * (t1 - t0))
+    lo = 0.2 * max_duration if min_duration is None else min(float(min_duration), max_duration)
     out = []
     for k in range(count):
         for _ in range(1000):
-            d = float(rng.uniform(0.2, 1.0) * max_duration)
+            d = float(rng.uniform(lo, max_duration)) if min_duration is not None \
+                else float(rng.uniform(0.2, 1.0) * max_duration)
             s = t0 if (startup and k == 0) else float(rng.uniform(t0, max(t0, t1 - d)))
             if all(s >= w.end or s + d <= w.start for w in out):
                 break
@@ -439,6 +442,35 @@ def random_outlier_windows(t0, t1, count, rng, *, max_duration=300.0, sigma=200.
             break
         out.append(OutlierWindow(s, d, sigma, str(kinds[int(rng.integers(len(kinds)))])))
     return sorted(out, key=lambda w: w.start)
+
+
+@dataclass
+class OdometerModel:
+    """Wheel speed (odometer) of a car: forward speed at the rear axle, with a scale-factor
+    error (tyre radius, pressure, wear), white noise and quantisation.
+
+    ``speed = q·round((1 + k)·v / q + n)``, ``k ~ N(0, scale_factor_sigma²)`` drawn once per
+    drive, ``n`` white with σ ``noise_mps / q``; never negative (a wheel-speed sensor without a
+    direction signal). ``rate_hz`` samples per second, each the speed at its time stamp.
+    """
+
+    scale_factor_sigma: float = 0.005
+    quantum_mps: float = 0.01
+    noise_mps: float = 0.0
+    rate_hz: float = 10.0
+
+    def simulate(self, t, speed, rng):
+        """Samples ``(t_out, speed_out, k)`` of a true forward speed ``speed`` (m/s) at ``t``."""
+        rng = np.random.default_rng(rng)
+        if not 0.0 < self.rate_hz <= 1000.0:
+            raise SelfnavError(f"odometer rate {self.rate_hz} Hz outside (0, 1000]")
+        dt = 1.0 / self.rate_hz
+        t_out = np.arange(np.ceil(t[0] / dt) * dt, t[-1] + 1e-9, dt)
+        k = float(rng.normal() * self.scale_factor_sigma)
+        v = (1.0 + k) * np.interp(t_out, t, speed) + rng.normal(size=len(t_out)) * self.noise_mps
+        if self.quantum_mps > 0:
+            v = np.round(v / self.quantum_mps) * self.quantum_mps
+        return t_out, np.maximum(v, 0.0), k
 
 
 @dataclass

@@ -171,3 +171,27 @@ class AttitudeData:
 
     def __len__(self) -> int:
         return len(self.t)
+
+
+@dataclass
+class OdometerData:
+    """Wheel speed (odometer): ``t`` (N,) s on the IMU's clock and ``speed_mps`` (N,) the
+    vehicle's forward speed at that instant (rear axle), m/s, as the sensor reports it (its
+    scale-factor error included); ``meta`` what the source says about it (a simulator: the
+    true ``scale_factor``)."""
+
+    t: np.ndarray
+    speed_mps: np.ndarray
+    source: str = ""
+    meta: dict = field(default_factory=dict)
+
+    def __len__(self) -> int:
+        return len(self.t)
+
+    def select(self, mask) -> "OdometerData":
+        """A subset of the samples (index array, slice or boolean mask)."""
+        return OdometerData(self.t[mask], self.speed_mps[mask], self.source, dict(self.meta))
+
+    def shifted(self, dt_s: float) -> "OdometerData":
+        """The same samples with ``dt_s`` added to every time stamp."""
+        return replace(self, t=self.t + dt_s, meta=dict(self.meta))

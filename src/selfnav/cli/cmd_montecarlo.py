@@ -40,6 +40,7 @@ def register(app: typer.Typer) -> None:
     ):
         """Error statistics of a method over N seeded simulations against its own sigma."""
         from selfnav import api
+        from selfnav import campaigns  # noqa: F401  (registers the pairs that run the API)
         from selfnav import montecarlo as mc
         from selfnav.io.output import check_output_file
 

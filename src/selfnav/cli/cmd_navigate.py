@@ -42,6 +42,15 @@ def _magnetometer(imu, mag_path: Path | None):
     return imu
 
 
+def _odometer(imu_path: Path, odo_path: Path | None):
+    """Wheel speed from ``--odometer`` or the ``speed_mps`` column of the IMU CSV (or None)."""
+    from selfnav.io.odometer import has_odometer, read_odometer
+
+    if odo_path is not None:
+        return read_odometer(odo_path)
+    return read_odometer(imu_path) if has_odometer(imu_path) else None
+
+
 def register(app: typer.Typer) -> None:
     @app.command("navigate")
     def navigate_cmd(
@@ -105,6 +114,9 @@ def register(app: typer.Typer) -> None:
         mag: Annotated[Optional[Path], typer.Option(
             "--mag", help="Magnetometer CSV t,mx,my,mz (default: mx,my,mz columns of the IMU "
                           "CSV).")] = None,
+        odometer: Annotated[Optional[Path], typer.Option(
+            "--odometer", help="Wheel speed CSV t,speed_mps on the IMU clock (default: the "
+                               "speed_mps column of the IMU CSV, if any).")] = None,
         as_json: opt.Json = False,
     ):
         """Navigate with an IMU and GNSS; survives unflagged GNSS outliers (window test)."""
@@ -129,6 +141,7 @@ def register(app: typer.Typer) -> None:
                 graph = api.read_roads(map_)
             else:
                 graph = api.check_map_covers(map_, g.lat, g.lon, what="GNSS fixes")
+        odo = _odometer(imu, odometer)
         t0 = time.perf_counter()
         progress = bar = None
         if not as_json and sys.stderr.isatty():
@@ -145,7 +158,8 @@ def register(app: typer.Typer) -> None:
                                window_test=window_test, nhc=nhc, shadows=shadows,
                                mount_states=mount_states, scale_factors=scale_factors or None,
                                matcher=matcher, ins_datum=ins_datum,
-                               declination_deg=declination_deg, init=init, progress=progress)
+                               declination_deg=declination_deg, init=init, progress=progress,
+                               odometer=odo)
         except np.linalg.LinAlgError as e:   # a safety net: one line, not a traceback
             from selfnav.io.imu import MAX_BRIDGE_SAMPLES, imu_gaps
 

@@ -126,6 +126,9 @@ class StateOptions:
     time_offset : the residual IMU time offset (+1), s, left by the data pre-pass
     time_offset_sigma : its initial σ, s
     time_offset_rw : its random walk, s/√s (clock drift)
+    odometer : the odometer's scale-factor error (+1), with an odometer input
+    odometer_scale_sigma : its initial σ (fraction: tyre radius, pressure, wear)
+    odometer_scale_rw : its random walk, 1/√s
     """
 
     scale_factors: bool = False
@@ -139,6 +142,9 @@ class StateOptions:
     time_offset: bool = False
     time_offset_sigma: float = 0.05
     time_offset_rw: float = 1e-5
+    odometer: bool = False
+    odometer_scale_sigma: float = 0.02
+    odometer_scale_rw: float = 1e-5
 
 
 @dataclass
@@ -209,6 +215,9 @@ class VehicleConstraints:
     zupt_gyro : |ω| below this over the block, rad/s
     zupt_accel : std of |f| over the block below this, m/s²
     aid_step : interval of NHC / ZUPT / road updates, s
+    odometer_sigma : m/s, white error of one wheel-speed sample (quantisation, slip)
+    odometer_step : s, the shortest interval between odometer updates (faster samples are
+        thinned: the speed is smooth, each update costs an epoch)
     """
 
     nhc: bool = True
@@ -223,6 +232,8 @@ class VehicleConstraints:
     zupt_gyro: float = 1.0 * DEG
     zupt_accel: float = 0.15
     aid_step: float = 0.2
+    odometer_sigma: float = 0.05
+    odometer_step: float = 0.2
 
 
 @dataclass

@@ -8,6 +8,7 @@ seed 004 fast loop); the filter estimates its errors
          [+ δμ]           IMU pitch and yaw relative to the vehicle (2)
          [+ δl]           IMU → antenna lever arm, body RFU, m (3)
          [+ δε]           IMU time offset, s (1)
+         [+ δk]           odometer scale factor (1)
 
 with ``δ(·) = estimated − true`` and the attitude error ``C̃_b^n = (I − [ψ]) C_b^n``. Which
 optional blocks exist is the :class:`StateLayout` of the configuration. Error dynamics
@@ -18,7 +19,7 @@ optional blocks exist is the :class:`StateLayout` of the configuration. Error dy
     ψ̇ = −ω_in × ψ + C_b^n (δb_g + diag(ω_b) δs_g)
     δḃ = −δb/τ + w                 (τ = ∞ by default: a turn-on constant plus a random walk
                                     whose density matches the bias instability)
-    δμ̇ = δl̇ = δε̇ = 0 (+ a small random walk)
+    δμ̇ = δl̇ = δε̇ = δk̇ = 0 (+ a small random walk)
 
 The process noise is ``λ Q`` with ``λ`` the noise scale that :mod:`selfnav.ins.calibrate`
 adapts to the data (1 for a trusted noise model).
@@ -31,6 +32,10 @@ compared with the INS shifted back by ``ε̂``::
                                       ∂h/∂δε = −v^n
 
 **GNSS velocity** at the antenna: ``v^n + C_b^n (ω_b × l̂)``.
+
+**Odometer** (wheel speed): the forward speed in the vehicle frame at the NHC point (rear
+axle), scaled by ``1 + k``: ``h(x) = (1 + k̂) v_v,F`` (see the NHC below for ``v_v``),
+``∂h/∂δk = v_v,F``.
 
 The non-holonomic constraint holds in the *vehicle* frame at a point that does not slip
 sideways (the rear-axle centre), not at the IMU: ``v_v = C_vb (C_bn^T v^n + ω_b × l_nhc)``
@@ -53,7 +58,7 @@ import numba
 import numpy as np
 
 from selfnav import attitude as att
-from selfnav.attitude import skew3
+from selfnav.attitude import rotvec_to_dcm3, skew3
 from selfnav.earth import OMEGA_EARTH, WGS84, enu_offset, radii
 from selfnav.ins.config import CHI2_1_999, CHI2_2_999, CHI2_3_999, FilterConfig
 from selfnav.ins.strapdown import Strapdown
@@ -63,11 +68,11 @@ NX = 15
 IR, IV, IP, IBG, IBA = slice(0, 3), slice(3, 6), slice(6, 9), slice(9, 12), slice(12, 15)
 
 #: packed nominal state (the smoother's record): lat, lon, h, v(3), C_nb(9), b_g(3), b_a(3),
-#: s_g(3), s_a(3), μ(2), l(3), ε(1)
+#: s_g(3), s_a(3), μ(2), l(3), ε(1), k(1)
 PACK = dict(pos=slice(0, 3), vel=slice(3, 6), C=slice(6, 15), bg=slice(15, 18),
             ba=slice(18, 21), sg=slice(21, 24), sa=slice(24, 27), mu=slice(27, 29),
-            lever=slice(29, 32), toff=slice(32, 33))
-PACK_SIZE = 33
+            lever=slice(29, 32), toff=slice(32, 33), odo=slice(33, 34))
+PACK_SIZE = 34
 
 
 @dataclass(frozen=True)
@@ -80,6 +85,7 @@ class StateLayout:
     mu: slice | None = None
     lever: slice | None = None
     toff: slice | None = None
+    odo: slice | None = None
 
     @classmethod
     def of(cls, cfg: FilterConfig) -> "StateLayout":
@@ -89,7 +95,8 @@ class StateLayout:
                                ("sa", 3, cfg.states.scale_factors),
                                ("mu", 2, cfg.states.mount_states),
                                ("lever", 3, cfg.states.lever_arm),
-                               ("toff", 1, cfg.states.time_offset)):
+                               ("toff", 1, cfg.states.time_offset),
+                               ("odo", 1, cfg.states.odometer)):
             if on:
                 blocks[name] = slice(n, n + size)
                 n += size
@@ -97,7 +104,7 @@ class StateLayout:
 
     def blocks(self):
         """``(name, slice)`` of the optional blocks present."""
-        return [(k, getattr(self, k)) for k in ("sg", "sa", "mu", "lever", "toff")
+        return [(k, getattr(self, k)) for k in ("sg", "sa", "mu", "lever", "toff", "odo")
                 if getattr(self, k) is not None]
 
 
@@ -318,9 +325,9 @@ class InsGnssFilter:
     bias_scale : float
         ``λ_b``, a further scale of the slowly varying part (bias instability, lever arm,
         time offset and mounting random walks), which a still segment cannot measure.
-    bg, ba, sg, sa, mu, lever_b, time_offset :
-        The estimated sensor errors, mounting angles, lever arm (body RFU, m) and residual
-        IMU time offset (s, added to the IMU stamps).
+    bg, ba, sg, sa, mu, lever_b, time_offset, odo_scale :
+        The estimated sensor errors, mounting angles, lever arm (body RFU, m), residual
+        IMU time offset (s, added to the IMU stamps) and odometer scale-factor error.
     """
 
     def __init__(self, cfg: FilterConfig, t0, lat, lon, h, velocity_n, C_nb, *, ellipsoid=WGS84):
@@ -337,6 +344,7 @@ class InsGnssFilter:
         self.mu = np.array(cfg.states.mount_rad, dtype=float)
         self.lever_b = np.array(cfg.gnss.lever_arm_b, dtype=float).reshape(3)
         self.time_offset = 0.0
+        self.odo_scale = 0.0
         self.q_scale = 1.0
         self.bias_scale = 1.0
         imu = cfg.imu
@@ -355,6 +363,8 @@ class InsGnssFilter:
             P[lay.lever, lay.lever] = np.eye(3) * cfg.states.lever_arm_sigma**2
         if lay.toff is not None:
             P[lay.toff, lay.toff] = cfg.states.time_offset_sigma**2
+        if lay.odo is not None:
+            P[lay.odo, lay.odo] = cfg.states.odometer_scale_sigma**2
         self.P = P
         self._f_n = np.array([0.0, 0.0, 9.8])
         self._w_b = np.zeros(3)
@@ -386,6 +396,8 @@ class InsGnssFilter:
             q[lay.toff] = cfg.states.time_offset_rw**2
         if lay.mu is not None:
             q[lay.mu] = cfg.states.mount_rw**2
+        if lay.odo is not None:
+            q[lay.odo] = cfg.states.odometer_scale_rw**2
         return q
 
     def _F(self):
@@ -457,6 +469,8 @@ class InsGnssFilter:
             self.lever_b -= dx[lay.lever]
         if lay.toff is not None:
             self.time_offset -= float(dx[lay.toff.start])
+        if lay.odo is not None:
+            self.odo_scale -= float(dx[lay.odo.start])
 
     def kalman(self, r, H, R):
         """Apply a measurement (residual ``h(x̃) − z``, Jacobian ``H``, noise ``R``) and correct
@@ -533,7 +547,53 @@ class InsGnssFilter:
         s_up = veh.nhc_sigma if veh.nhc_sigma_up is None else veh.nhc_sigma_up
         return self.kalman(r, H, np.diag([veh.nhc_sigma**2, s_up**2]))
 
-    def update_road(self, normal_n, offset, sigma, heading=None, sigma_heading=None):
+    def vehicle_velocity(self):
+        """Velocity at the NHC point (rear axle) in the vehicle frame (NHC docstring) and
+        ``C_vn``: ``(v_v, C_vn)``."""
+        C_nb = self.ins.C_nb
+        vv = C_nb @ self.ins.velocity_n
+        C_vn = C_nb
+        lever = self._nhc_lever
+        if lever[0] or lever[1] or lever[2]:
+            vv = vv + np.cross(self._w_b, lever)
+        if self.layout.mu is not None or self.mu[0] or self.mu[1]:
+            C_vb = rotvec_to_dcm3(np.array([self.mu[0], 0.0, self.mu[1]]))
+            C_vn = C_vb @ C_nb
+            vv = C_vb @ vv
+        return vv, C_vn
+
+    def update_odometer(self, speed, sigma=None):
+        """Odometer (wheel speed): the forward speed at the rear axle in the vehicle frame,
+        scaled by ``1 + k`` (module docstring; the scale-factor state with
+        ``states.odometer``)::
+
+            h = (1 + k̂) v_v,F,   ∂h/∂δv = (1 + k̂) C_vn[F],   ∂h/∂ψ = −(1 + k̂) C_vn[F] [v^n×],
+            ∂h/∂δk = v_v,F,      ∂h/∂δμ = −(1 + k̂) [v_v×][F] (pitch, yaw)
+
+        ``sigma`` (m/s; default ``vehicle.odometer_sigma``) is inflated by NIS/gate beyond the
+        χ² gate (Huber-like: wheel slip, a wrong scale at the start) rather than the sample
+        dropped. Returns the error-state correction.
+        """
+        vv, C_vn = self.vehicle_velocity()
+        lay = self.layout
+        g = 1.0 + self.odo_scale
+        H = np.zeros((1, self.nx))
+        H[0, IV] = g * C_vn[1]
+        H[0, IP] = -g * C_vn[1] @ skew3(self.ins.velocity_n)
+        if lay.mu is not None:
+            H[0, lay.mu] = -g * skew3(vv)[1, [0, 2]]
+        if lay.odo is not None:
+            H[0, lay.odo.start] = vv[1]
+        s = self.cfg.vehicle.odometer_sigma if sigma is None else float(sigma)
+        R = np.array([[s * s]])
+        r = np.array([g * vv[1] - float(speed)])
+        q = nis(self.P, H, R, r)
+        if q > CHI2_1_999:
+            R = R * (q / CHI2_1_999)
+        return self.kalman(r, H, R)
+
+    def update_road(self, normal_n, offset, sigma, heading=None, sigma_heading=None, *,
+                    along_n=None, along_offset=None, sigma_along=None, gate=True):
         """Road constraint: the vehicle is on the road centre line (and heads along it).
 
         Parameters
@@ -545,8 +605,15 @@ class InsGnssFilter:
             σ of the true offset (half a lane, or the road's width), m.
         heading, sigma_heading : float, optional
             Road direction of travel (rad, clockwise from North) and its σ.
+        along_n, along_offset, sigma_along : optional
+            A position along the road too (a corner the map places,
+            :mod:`selfnav.roads.corners`): unit direction, signed offset of the INS from it
+            along that direction (m) and its σ.
+        gate : bool
+            χ² gate (0.999) on the whole update; False for a constraint whose caller has
+            judged it by other means.
 
-        Returns the error-state correction (gated at χ² 0.999).
+        Returns the error-state correction.
         """
         rows, res, var = [], [], []
         h = np.zeros(self.nx)
@@ -554,6 +621,12 @@ class InsGnssFilter:
         rows.append(h)
         res.append(offset)
         var.append(sigma**2)
+        if along_n is not None:
+            h1 = np.zeros(self.nx)
+            h1[0:2] = along_n
+            rows.append(h1)
+            res.append(along_offset)
+            var.append(sigma_along**2)
         if heading is not None:
             _, _, hdg = att.euler_from_dcm_nb(self.ins.C_nb)
             h2 = np.zeros(self.nx)
@@ -561,8 +634,10 @@ class InsGnssFilter:
             rows.append(h2)
             res.append(float(np.angle(np.exp(1j * (hdg - heading)))))
             var.append(sigma_heading**2)
+        if not gate:
+            return self.kalman(np.array(res), np.array(rows), np.diag(var))
         return self._gated(np.array(res), np.array(rows), np.diag(var),
-                           CHI2_2_999 if len(res) == 2 else CHI2_1_999)
+                           {1: CHI2_1_999, 2: CHI2_2_999}.get(len(res), CHI2_3_999))
 
     def update_zupt(self):
         H = np.zeros((3, self.nx))
@@ -592,7 +667,8 @@ def pack_state(flt) -> np.ndarray:
     """The nominal state and sensor estimates of a filter as one row (:data:`PACK`)."""
     s = flt.ins
     return np.concatenate([[s.lat, s.lon, s.h], s.velocity_n, s.C_nb.reshape(9), flt.bg, flt.ba,
-                           flt.sg, flt.sa, flt.mu, flt.lever_b, [flt.time_offset]])
+                           flt.sg, flt.sa, flt.mu, flt.lever_b, [flt.time_offset],
+                           [flt.odo_scale]])
 
 
 def unpack_states(t, states, Ps):

@@ -2,8 +2,8 @@
 
 :class:`StreamingNavigator` takes IMU samples and GNSS fixes as they arrive (``add_imu``,
 ``add_gnss``) and processes every epoch once the IMU stream has passed it: the aiding epochs
-(non-holonomic constraint or zero-velocity update, a road constraint), the GNSS fixes and any
-heading measurements, in the order (time, kind). :func:`run_filter` is the batch call: it
+(non-holonomic constraint or zero-velocity update, a road constraint), the GNSS fixes, any
+heading measurements and odometer samples (``add_odometer``), in the order (time, kind). :func:`run_filter` is the batch call: it
 feeds a whole record through the same class, so both give identical results.
 
 Each fix, in this order (DESIGN §7, §10):
@@ -75,6 +75,7 @@ class FilterResult:
     time_offset: np.ndarray | None = None  # (N,) residual IMU time offset, s
     gnss_status: np.ndarray | None = None  # (N,) str: the last fix's status at each row
     fix_log: dict | None = None   # per fix: t, status, reason, nis_h, nis_v, nis_vel, anchored
+    odometer_scale: np.ndarray | None = None  # (N,) odometer scale-factor error estimate
 
     @property
     def sigma_h(self) -> np.ndarray:
@@ -164,6 +165,8 @@ class StreamingNavigator:
                                     "anchored")}
         self.innov, self.mode = [], []
         self.headings = []
+        self.odometer = []         # (speed m/s, σ or None) of each odometer sample
+        self._t_odo = -np.inf
         self.rec = {k: [] for k in ("t", "state", "P", "Pm", "Phi", "dx", "brk", "q")}
         self._reset = False        # the state was replaced at this epoch (smoother break)
         self._widened = None       # covariance added at this epoch without a measurement
@@ -224,6 +227,18 @@ class StreamingNavigator:
         self.headings.append((float(heading), float(sigma)))
         if t > self.t0:
             self._push(t, 2, len(self.headings) - 1)
+
+    def add_odometer(self, t, speed, sigma=None):
+        """A wheel-speed sample (forward speed at the rear axle, m/s; σ default
+        ``vehicle.odometer_sigma``), needs ``states.odometer``. Samples closer than
+        ``vehicle.odometer_step`` to the previous one are skipped."""
+        if t <= self.t0 or t - self._t_odo < self.cfg.vehicle.odometer_step - 1e-9:
+            return
+        if self.flt.layout.odo is None:
+            raise SelfnavError("odometer samples need the scale-factor state (states.odometer)")
+        self._t_odo = float(t)
+        self.odometer.append((float(speed), sigma))
+        self._push(t, 3, len(self.odometer) - 1)
 
     def _push(self, t, kind, k):
         heapq.heappush(self._events, (float(t), kind, self._seq, k))
@@ -361,6 +376,8 @@ class StreamingNavigator:
                     dx = dx + flt.update_road(**meas)
         elif kind == 2:
             dx = flt.update_heading(*self.headings[k])
+        elif kind == 3:
+            dx = flt.update_odometer(*self.odometer[k])
         else:
             dx = self._fix(k)
         if self.guard is not None:
@@ -393,6 +410,10 @@ class StreamingNavigator:
         linked, anchored = self._chain(k)
         r, H = flt.position_residual(fx.lat, fx.lon, fx.h)
         self.innov[k] = -r
+        veto = getattr(self.road_aid, "fix_veto", None)
+        veto = veto(fx.t, fx.lat, fx.lon, fx.sigma_file, flt) if veto is not None else None
+        if veto:
+            return self._vetoed(k, veto)
         R = np.diag([fx.sigma_h**2, fx.sigma_h**2, fx.sigma_v**2])
         S = H @ flt.P @ H.T + R
         nis_h = float(r[:2] @ np.linalg.solve(S[:2, :2], r[:2]))
@@ -471,6 +492,22 @@ class StreamingNavigator:
         if fx.velocity_n is not None and cfg.gnss.use_velocity:
             dx = dx + self._velocity(k)
         return dx
+
+    def _vetoed(self, k, reason):
+        """A fix the road aid objects to (:meth:`selfnav.roads.aid.EkfRoadAid.fix_veto`):
+        rejected like one the gates reject, and it may neither re-acquire nor re-initialise."""
+        out = self.cfg.outliers
+        if out.robust:
+            self.win = (self.win + [(k, self.disp.copy())])[-out.window:]
+        self._last_used = False
+        self.rejections += 1
+        self.streak = 0
+        self._lost_since = None       # the map holds the INS: not lost
+        self._log(k, 0, reason)
+        if out.robust and self.rejections >= out.suspect_after and not self.suspect:
+            self._enter_suspect(self.fixes[k].t)
+        self.mode[k] = int(self.suspect)
+        return np.zeros(self.flt.nx)
 
     def _velocity(self, k):
         """The fix's velocity, gated on its own (a position outlier may carry a good velocity)."""
@@ -700,7 +737,8 @@ class StreamingNavigator:
             states[:, PACK["mu"]] if lay.mu is not None else None,
             states[:, PACK["lever"]] if lay.lever is not None else None,
             states[:, PACK["toff"]][:, 0] if lay.toff is not None else None,
-            np.array([codes[c] for c in q], dtype=object), fix_log)
+            np.array([codes[c] for c in q], dtype=object), fix_log,
+            states[:, PACK["odo"]][:, 0] if lay.odo is not None else None)
 
 
 def concatenate_results(results) -> FilterResult:
@@ -727,7 +765,7 @@ def concatenate_results(results) -> FilterResult:
                         cat("gyro_bias"), cat("accel_bias"), cat("fix_t"), cat("fix_status"),
                         cat("innovations"), cat("nis"), cat("mode"), results[0].smoothed, stats,
                         cat("mounting"), cat("lever_arm"), cat("time_offset"),
-                        cat("gnss_status"), log)
+                        cat("gnss_status"), log, cat("odometer_scale"))
 
 
 def output_trajectory(res: FilterResult, *, antenna: bool = False) -> Trajectory:
@@ -759,7 +797,8 @@ def fixes_sigma(gnss: GnssData, cfg: FilterConfig) -> np.ndarray:
 
 
 def run_filter(imu, gnss: GnssData, cfg: FilterConfig | None = None, *, init=None,
-               smooth: bool = False, heading=None, road_aid=None, progress=None) -> "FilterResult":
+               smooth: bool = False, heading=None, road_aid=None, progress=None,
+               odometer=None) -> "FilterResult":
     """Run the loosely coupled filter over a whole record (batch call).
 
     Parameters
@@ -781,6 +820,8 @@ def run_filter(imu, gnss: GnssData, cfg: FilterConfig | None = None, *, init=Non
         :meth:`~selfnav.ins.ekf.InsGnssFilter.update_road` arguments (a map matcher that knows
         which road the vehicle is on).
     progress : callable(fraction), optional
+    odometer : OdometerData, optional
+        Wheel speed on the IMU's clock (needs ``cfg.states.odometer``).
     """
     cfg = cfg or FilterConfig()
     n = len(gnss.t)
@@ -799,6 +840,9 @@ def run_filter(imu, gnss: GnssData, cfg: FilterConfig | None = None, *, init=Non
     if heading is not None:
         for k in range(len(heading[0])):
             nav.add_heading(heading[0][k], heading[1][k], heading[2][k])
+    if odometer is not None:
+        for t_o, v_o in zip(odometer.t.tolist(), odometer.speed_mps.tolist()):
+            nav.add_odometer(t_o, v_o)
     chunks = np.array_split(np.arange(len(imu.t)), max(1, len(imu.t) // 20000))
     for c, idx in enumerate(chunks):
         nav.add_imu(imu.t[idx], imu.omega_ib_b[idx], imu.f_ib_b[idx])

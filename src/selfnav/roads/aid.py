@@ -10,8 +10,69 @@ from __future__ import annotations
 
 import numpy as np
 
-from selfnav.roads.particles import TWO_PI, MatcherConfig, RoadParticles, wrap
+from selfnav.ins.align import robust_init
+from selfnav.ins.config import CHI2_2_999, CHI2_2_9999
+from selfnav.roads.corners import corner_candidates, line_intersection
 from selfnav.roads.graph import RoadGraph
+from selfnav.roads.particles import TWO_PI, MatcherConfig, RoadParticles, wrap
+
+
+def start_on_roads(imu, gnss, graph: RoadGraph, cfg=None, *, span=30.0, far_sigmas=2.0,
+                   max_far=0.15, sigma=10.0):
+    """The navigator's start (:func:`selfnav.ins.align.robust_init`) checked against the map.
+
+    ``robust_init`` waits for a run of fixes that look healthy by themselves; a receiver that
+    drifts smoothly from power-on passes that test (its second differences are small) and the
+    in-motion alignment takes its drift rate for velocity — tens of degrees of heading at
+    walking speed. The map sees it: the fixes from 10 s before the start to ``span`` s after
+    must lie on roads that run the way they move (the course of a line through the fixes
+    within ±4 s, where faster than 3 m/s, within 30° of the road's direction), at most
+    ``max_far`` of them farther than ``far_sigmas`` fix σ from every such road (a nominal fix:
+    about 5 %). If not, the start is tried again after that span (up to 20 times); with no
+    start that passes, the first one is kept.
+    """
+    sig = np.asarray(gnss.sigma_m, float) if gnss.sigma_m is not None else \
+        np.full(len(gnss.t), np.nan)
+    sig = np.where(np.isfinite(sig), sig, sigma)
+    x, y = graph.to_local(gnss.lat, gnss.lon)
+    xy = np.column_stack([x, y])
+    first = None
+    t_from = -np.inf
+    for _ in range(20):
+        sub = gnss.select(gnss.t >= t_from)
+        if len(sub) < 25:
+            break
+        init = robust_init(imu, sub, cfg=cfg)
+        first = first or init
+        t0 = float(init["t"])
+        idx = np.flatnonzero((gnss.t >= t0 - 10.0) & (gnss.t <= t0 + span))
+        if len(idx) < 5 or np.mean(_off_roads(graph, gnss.t, xy, idx, far_sigmas * sig)) \
+                <= max_far:
+            return init
+        t_from = t0 + span
+    return first if first is not None else robust_init(imu, gnss, cfg=cfg)
+
+
+def _off_roads(graph, t, xy, idx, radius):
+    """For fixes ``idx``: is no road running their way within ``radius`` (see
+    :func:`start_on_roads`)?"""
+    import shapely
+
+    course = np.full(len(idx), np.nan)
+    for j, k in enumerate(idx):
+        m = np.abs(t - t[k]) <= 4.0
+        if m.sum() >= 5:
+            tt = t[m] - t[k]
+            v = np.polyfit(tt, xy[m], 1)[0]
+            if np.hypot(*v) > 3.0:
+                course[j] = np.arctan2(v[0], v[1])
+    q, si = graph.tree.query(shapely.points(xy[idx]), predicate="dwithin",
+                             distance=radius[idx])
+    ok = np.isnan(course[q]) | (np.abs(wrap(graph.seg_heading[si] - course[q]))
+                                < np.radians(30.0))
+    on = np.zeros(len(idx), bool)
+    on[q[ok]] = True
+    return ~on
 
 
 def _heading_of(C_nb):
@@ -58,11 +119,23 @@ class EkfRoadAid:
     bend_zone : distance from a bend's vertex within which the corner logic applies, m
     grade_sigma : σ of the road grade (level-road prior; None: off)
     seed : random stream
+    veto_window : s of fixes the map's GNSS check (:meth:`fix_veto`) judges
+    veto_min_m : the smallest mean offset across the road it objects to, m
+    lock_m : the filter is on the road when its last constraint found it within this, m
+    max_veto : s after which the check stops objecting (an outlier episode is shorter)
+    release_s : s the fixes must sit still against the filter, on a road, to end an objection
+    sigma_corner : σ of a corner fix along and across the road, m (:meth:`_corner_fix`)
+    q_along : (m/s)²/s, along-track speed variance added while the cloud judges GNSS
+        unhealthy (:meth:`_widen_along`; None: off)
+    curve_sigma : σ of the cross-track constraint while turning through a gentle curve (no
+        vertex above 20° near), m (None: none)
     """
 
     def __init__(self, graph: RoadGraph, gnss, cfg: MatcherConfig | None = None, *,
                  sigma_cross=1.0, sigma_arc=1.0, sigma_heading=np.radians(5.0), interval=1.0,
-                 agree_m=10.0, arc_agree_m=4.0, bend_zone=25.0, grade_sigma=0.08, seed=0):
+                 agree_m=10.0, arc_agree_m=4.0, bend_zone=25.0, grade_sigma=0.08, seed=0,
+                 veto_window=10.0, veto_min_m=12.0, lock_m=5.0, max_veto=330.0, release_s=20.0,
+                 sigma_corner=2.5, q_along=0.01, curve_sigma=2.0):
         self.g = graph
         self.pf = RoadParticles(graph, cfg, seed)
         x, y = graph.to_local(gnss.lat, gnss.lon)
@@ -89,7 +162,24 @@ class EkfRoadAid:
         self.seg_cur = -1
         self.history = []      # (t, x, y, seg, spread, line share)
         self.corner = self._corner_nodes()
-        self.counts = {"line": 0, "leg": 0, "arc": 0, "grade": 0}
+        self.counts = {"line": 0, "leg": 0, "arc": 0, "curve": 0, "grade": 0, "veto": 0,
+                       "corner": 0}
+        self.curve_sigma = curve_sigma
+        self.sigma_corner = sigma_corner
+        self.q_along = q_along
+        self.track = []            # (t, heading, position) of the filter, recent seconds
+        self.turn = None           # the turn being driven: {"t0", "t_calm"}
+        self.corner_log = []       # (t, correction E, N) of each corner fix
+        self.veto_window = veto_window
+        self.veto_min_m = veto_min_m
+        self.lock_m = lock_m
+        self.lock = None           # (t, normal) of the last constraint that found the filter on it
+        self.across = []           # (t, fix − filter across the road, along it, heading)
+        self.vetoing = False
+        self.vetoed = set()        # times of the fixes objected to
+        self.t_veto = -np.inf
+        self.max_veto = max_veto
+        self.release_s = release_s
 
     def _corner_nodes(self):
         """Per segment: does it end (start) in a bend of more than 20° on some way on?"""
@@ -207,7 +297,7 @@ class EkfRoadAid:
             # the fixes before the start are behind it (taken at once they dragged the cloud
             # 1 km off, seen); the start follows a run of healthy fixes (robust_init)
             self.k = int(np.searchsorted(self.fix_t, t - 1.0, side="right"))
-            pf._steps = [0.0] * (pf.cfg.health_window - 1)
+            pf.reset_health(healthy_history=True)
         v = ins.velocity_n
         dt = t - self.t_last
         speed = float(np.hypot(v[0], v[1]))
@@ -221,9 +311,17 @@ class EkfRoadAid:
             self.radii.append(speed / abs(rate))
         elif not turning:
             self.radii = []
+        corner = self._corner_fix(t, flt, p_ins, hdg, turning, speed)
+        self._widen_along(flt, hdg, dt)
         pf.predict(speed * dt, hdg, dt)
         while self.k < len(self.fix_t) and self.fix_t[self.k] <= t:
-            pf.update_gnss(self.fix_xy[self.k], self.sig[self.k])
+            if float(self.fix_t[self.k]) in self.vetoed:
+                # a fix the map objects to is no fix for the cloud either (a drift would
+                # otherwise pull it along the roads, re-seed it on them); its health test
+                # starts again after the objection
+                pf.reset_health()
+            else:
+                pf.update_gnss(self.fix_xy[self.k], self.sig[self.k])
             self.k += 1
         est = pf.estimate()
         if est["seg"] != self.seg_cur:
@@ -235,6 +333,13 @@ class EkfRoadAid:
         if legs is not None:
             share = max(share, self._line_weight(legs, w, pos))
         self.history.append((t, *est["xy"], est["seg"], est["spread"], share))
+        if corner is not None:
+            self.t_constraint = t
+            if np.hypot(*(est["xy"] - corner.pop("target"))) > 15.0:
+                pf.seed(p_ins - corner["e"], 10.0, heading=hdg)
+            if np.hypot(*corner.pop("e")) > 10.0:
+                self.across = []       # offsets from where the filter was
+            return corner
         # the cloud's error is correlated over seconds: one constraint per ``interval``
         if share < 0.8 or t - self.t_constraint < self.interval - 1e-9:
             return None
@@ -244,6 +349,12 @@ class EkfRoadAid:
             a0, _, nrm = self._line(est["seg"])
             out = {"normal_n": nrm, "offset": float((p_ins - a0) @ nrm), "kind": "line",
                    "heading": float(self.g.seg_heading[est["seg"]])}
+        elif legs is None and self.curve_sigma is not None:
+            # a gentle curve (vertices below 20°): the car follows the centre line within
+            # centimetres (a 12 m arc cuts a 10° vertex by 5 cm), but the heading changes
+            # along it: cross-track only, looser
+            a0, _, nrm = self._line(est["seg"])
+            out = {"normal_n": nrm, "offset": float((p_ins - a0) @ nrm), "kind": "curve"}
         elif legs is not None and not turning:
             # on one of the straight legs of a corner: the one the INS heading matches
             dh = [abs(float(wrap(self.g.seg_heading[q] - hdg))) for q in legs]
@@ -268,10 +379,19 @@ class EkfRoadAid:
         if abs(out["offset"]) > max(self.agree_m, 3.0 * float(np.sqrt(max(n @ P2 @ n, 0.0)))):
             return None
         self.t_constraint = t
+        if abs(out["offset"]) < self.lock_m:
+            # the normal to the right of travel (an arc's points to the centre)
+            n_r = np.array(out["normal_n"], float)
+            if n_r @ np.array([np.cos(hdg), -np.sin(hdg)]) < 0:
+                n_r = -n_r
+            self.lock = (t, n_r)
         kind = out.pop("kind")
         self.counts[kind] += 1
         if kind == "arc":
             out["sigma"] = self.sigma_arc
+            return out
+        if kind == "curve":
+            out["sigma"] = self.curve_sigma
             return out
         out["sigma"] = self.sigma_cross
         if self.sigma_heading is None:
@@ -279,3 +399,182 @@ class EkfRoadAid:
         else:
             out["sigma_heading"] = self.sigma_heading
         return out
+
+    def _widen_along(self, flt, hdg, dt):
+        """Along-track speed variance ``q_along·dt`` while GNSS is unhealthy (the cloud's test).
+
+        The filter does not model the IMU's axis misalignment: through the turns of a drive a
+        consumer part's 1 % cross-coupling tilts the INS by tenths of a degree, which without
+        GNSS leaks into the along-track speed (0.03–0.05 m/s² measured on the simulated
+        drives, 4σ beyond the filter's velocity σ). Widened, the filter takes the corners and
+        arcs that correct it instead of refusing them at its gates.
+        """
+        if self.q_along is None or self.pf.healthy or dt <= 0:
+            return
+        u = np.array([np.sin(hdg), np.cos(hdg)])
+        flt.P[3:5, 3:5] += np.outer(u, u) * (self.q_along * dt)
+
+    # ------------------------------------------------------------------ corners
+    def _corner_fix(self, t, flt, p_ins, hdg, turning, speed):
+        """A position fix from the map at the end of a turn (:mod:`selfnav.roads.corners`).
+
+        The turn runs from the first epoch the filter turns (0.6 s mean yaw rate above 3°/s)
+        to 1 s after it stops; the entry line is the filter's position and heading 1 s before
+        it, the exit line now. Turns of 35–150° within 20 s whose lines meet ahead of the entry
+        and behind the exit are looked up on the map within ``max(30 m, 3σ + 10 m)`` (at most
+        80 m) of that vertex; the candidate that fits the filter's uncertainty (χ² 2 dof,
+        0.999, of ``P + σ_corner²``) when the next one fits clearly worse (by 9: a grid of equal
+        corners) gives the correction, applied along and across the new road with σ
+        ``sigma_corner``.
+        """
+        self.track = [x for x in self.track if x[0] > t - 25.0] + [(t, hdg, p_ins.copy())]
+        if turning:
+            if self.turn is None:
+                self.turn = {"t0": t, "t_calm": None}
+            self.turn["t_calm"] = None
+            if t - self.turn["t0"] > 20.0:
+                self.turn = None
+            return None
+        if self.turn is None:
+            return None
+        if self.turn["t_calm"] is None:
+            self.turn["t_calm"] = t
+        if t - self.turn["t_calm"] < 1.0 - 1e-9:
+            return None
+        t0 = self.turn["t0"]
+        self.turn = None
+        before = [x for x in self.track if x[0] <= t0 - 1.0]
+        if not before or speed < 2.0:
+            return None
+        _, h0, p0 = before[-1]
+        th = float(wrap(hdg - h0))
+        if not np.radians(35.0) <= abs(th) <= np.radians(150.0):
+            return None
+        x = line_intersection(p0, h0, p_ins, hdg)
+        if x is None or x[1] < -10.0 or x[2] > 10.0:
+            return None
+        V = x[0]
+        P2 = flt.P[0:2, 0:2]
+        radius = min(80.0, max(30.0, 3.0 * float(np.sqrt(np.linalg.eigvalsh(P2)[-1])) + 10.0))
+        cand = corner_candidates(self.g, self.pf.off, self.pf.succ, V, h0, hdg, radius)
+        if len(cand) == 0:
+            return None
+        # each candidate against the filter's own uncertainty: the nearest must fit (χ² 2
+        # dof, 0.999) and the next must fit clearly worse (a grid of equal corners)
+        S = P2 + np.eye(2) * self.sigma_corner**2
+        E = V - cand
+        q = np.einsum("ij,ij->i", E, np.linalg.solve(S, E.T).T)
+        i = int(np.argmin(q))
+        if q[i] > CHI2_2_999 or (len(cand) > 1 and np.partition(q, 1)[1] < q[i] + 9.0):
+            return None
+        e = E[i]
+        if np.hypot(*e) < 2.0:
+            return None
+        u = np.array([np.sin(hdg), np.cos(hdg)])
+        n = np.array([u[1], -u[0]])
+        self.counts["corner"] += 1
+        self.corner_log.append((t, float(e[0]), float(e[1])))
+        return {"normal_n": n, "offset": float(e @ n), "sigma": self.sigma_corner,
+                "along_n": u, "along_offset": float(e @ u), "sigma_along": self.sigma_corner,
+                "gate": False, "e": e, "target": p_ins - e}
+
+    # ------------------------------------------------------------ GNSS check from the map
+    def fix_veto(self, t, lat, lon, sigma, flt) -> str | None:
+        """Does the map object to the GNSS fix at ``t`` (rad, rad, σ per axis m)? Returns the
+        reason, or None.
+
+        A smoothly drifting receiver (or a spoofer) is self-consistent: its fixes pass every
+        test of their own and, once the drift is slow enough, the filter's window test too;
+        after a while the navigator even concludes that the INS is lost and re-initialises
+        from them. The map is a witness the drift cannot fool. The offsets ``d`` of the fixes
+        from the filter (ENU, m) over the last ``veto_window`` s are fitted with a line (a
+        drift moves them). While the filter is *on the road* (its last road constraint, within
+        5 s, found it within ``lock_m``) the check starts objecting when the fixes are
+        consistent among themselves (robust spread about the line below 2.5 σ per axis: not
+        white 200 m outliers, which the filter's own gates handle) and the line now sits
+
+        * more than ``max(veto_min_m, 3σ/√n)`` across the filter's heading (the map's
+          evidence: the vehicle is on this road) — unless another road of the same
+          direction runs where the fixes are (the filter may be on the wrong one of two
+          parallel roads: the fixes decide), or
+        * farther than ``veto_min_m`` and outside the filter's own uncertainty (χ² 2 dof,
+          0.9999, of ``P + σ²/n``: an odometer keeps it small along the road).
+
+        Once objecting it goes on — the filter dead-reckons along the road, constrained by it,
+        whether or not the cloud gives a constraint at that moment, and a drift that crosses
+        another road or turns along it does not end it — until the fixes come back (the line
+        within ``veto_min_m / 2``), scatter like white outliers, or sit still against the
+        filter for ``release_s`` (slope below ``0.3 m/s + 2σ``) on a road of the filter's
+        direction (then the filter, not the fixes, is off: they decide), or ``max_veto`` s
+        pass. (A drift moves at σ/τ, 3.3 m/s for 200 m and 60 s; over 20 s it sat still on a
+        road of a grid now and then: Helsinki, seen; 60 s fixed that drive but failed
+        the 300 s outlier-window test, 4.96 m along against 4.5, so the default stays 20 s.)
+        """
+        ins = flt.ins
+        x, y = self.g.to_local(ins.lat, ins.lon)
+        zx, zy = self.g.to_local(lat, lon)
+        d = np.array([float(zx) - float(x), float(zy) - float(y)])
+        self.across = [a for a in self.across if a[0] > t - self.release_s] + [(t, d)]
+        locked = self.lock is not None and t - self.lock[0] <= 5.0
+        if not (self.vetoing or locked):
+            return None
+        recent = [a for a in self.across if a[0] > t - self.veto_window]
+        if len(recent) < 5:
+            return None
+        tt = np.array([a[0] for a in recent]) - t
+        D = np.array([a[1] for a in recent])
+        A = np.column_stack([np.ones(len(tt)), tt])
+        coef = np.linalg.lstsq(A, D, rcond=None)[0]
+        now = coef[0]
+        res = D - A @ coef
+        spread = 1.4826 * np.median(np.abs(res - np.median(res, axis=0)), axis=0)
+        hdg = _heading_of(ins.C_nb)
+        n_r = np.array([np.cos(hdg), -np.sin(hdg)])                  # right of the heading
+        across = float(now @ n_r)
+        dist = float(np.hypot(*now))
+        lim = max(self.veto_min_m, 3.0 * sigma / np.sqrt(len(D)))
+        white = bool(np.any(spread > 2.5 * sigma))
+        if self.vetoing:
+            if (white or dist < 0.5 * self.veto_min_m or t - self.t_veto > self.max_veto
+                    or self._still_on_a_road(t, np.array([float(x), float(y)]), hdg, sigma)):
+                self.vetoing = False
+                return None
+        else:
+            if white or dist < self.veto_min_m:
+                return None
+            S = flt.P[0:2, 0:2] + np.eye(2) * sigma**2 / len(D)
+            ins_says = float(now @ np.linalg.solve(S, now)) > CHI2_2_9999
+            map_says = abs(across) > lim and not self._road_at(
+                np.array([float(x), float(y)]) + now, hdg, 3.0 * sigma / np.sqrt(len(D)) + 3.0)
+            if not (ins_says or map_says):
+                return None
+            self.t_veto = t
+            self.vetoing = True
+        self.counts["veto"] += 1
+        self.vetoed.add(float(t))
+        return (f"off the road the map holds ({dist:.0f} m from the filter, {across:+.0f} m "
+                f"across, {len(D)} fixes)")
+
+    def _road_at(self, q, hdg, radius):
+        """Is there a road heading within 30° of ``hdg`` within ``radius`` of ``q``?"""
+        import shapely
+
+        near = np.asarray(self.g.tree.query(shapely.points(q), predicate="dwithin",
+                                            distance=float(radius)), np.int64)
+        return bool(len(near) and np.any(np.abs(wrap(self.g.seg_heading[near] - hdg))
+                                         < np.radians(30.0)))
+
+    def _still_on_a_road(self, t, p, hdg, sigma):
+        """Have the fixes sat still against the filter for ``release_s``, on a road of its
+        direction?"""
+        D = [a for a in self.across if a[0] > t - self.release_s]
+        if len(D) < 0.75 * self.release_s or t - D[0][0] < 0.9 * self.release_s:
+            return False
+        tt = np.array([a[0] for a in D]) - t
+        X = np.array([a[1] for a in D])
+        A = np.column_stack([np.ones(len(tt)), tt])
+        coef = np.linalg.lstsq(A, X, rcond=None)[0]
+        s_slope = sigma / np.sqrt(np.sum((tt - tt.mean()) ** 2))
+        if np.hypot(*coef[1]) > 0.3 + 2.0 * s_slope:
+            return False
+        return self._road_at(p + coef[0], hdg, 3.0 * sigma / np.sqrt(len(D)) + 3.0)

@@ -112,6 +112,57 @@ def move_particles(seg, along, dist, seg_len, seg_heading, seg_twin, off, succ, 
         along[i] = a
 
 
+@njit(cache=True)
+def densest_cells(cell, w):  # pragma: no cover - numba
+    """Particles in the 3 × 3 cells around the cell whose 3 × 3 neighbourhood holds the most
+    weight (the lowest such cell on ties)."""
+    n = len(w)
+    key = cell[:, 0] * 1_000_003 + cell[:, 1]
+    order = np.argsort(key)
+    ukey = np.empty(n, np.int64)
+    cw = np.zeros(n)
+    m = 0
+    for k in range(n):
+        q = key[order[k]]
+        if m == 0 or ukey[m - 1] != q:
+            ukey[m] = q
+            m += 1
+        cw[m - 1] += w[order[k]]
+    ukey, cw = ukey[:m], cw[:m]
+    best, j_best = -1.0, 0
+    for j in range(m):
+        d = 0.0
+        for dx in (-1, 0, 1):
+            for dy in (-1, 0, 1):
+                q = ukey[j] + dx * 1_000_003 + dy
+                i = np.searchsorted(ukey, q)
+                if i < m and ukey[i] == q:
+                    d += cw[i]
+        if d > best:
+            best, j_best = d, j
+    i0 = order[np.searchsorted(key[order], ukey[j_best])]
+    out = np.empty(n, np.bool_)
+    for j in range(n):
+        out[j] = (abs(cell[i0, 0] - cell[j, 0]) <= 1 and abs(cell[i0, 1] - cell[j, 1]) <= 1)
+    return out
+
+
+@njit(cache=True)
+def heaviest(seg, w):  # pragma: no cover - numba
+    """The value of ``seg`` with the most summed weight (the smallest on ties)."""
+    order = np.argsort(seg)
+    best, best_w = seg[order[0]], -1.0
+    k = 0
+    while k < len(order):
+        s, acc = seg[order[k]], 0.0
+        while k < len(order) and seg[order[k]] == s:
+            acc += w[order[k]]
+            k += 1
+        if acc > best_w:
+            best, best_w = s, acc
+    return int(best)
+
+
 @dataclass
 class MatcherConfig:
     """Noise model of :class:`RoadParticles` (SI units, radians)."""
@@ -270,6 +321,14 @@ class RoadParticles:
         r = np.sqrt(2.0) * s
         return bool(np.median(self._steps) < 1.5 * 1.18 * r and self._steps[-1] < 3.0 * r)
 
+    def reset_health(self, healthy_history: bool = False):
+        """Start the GNSS health test again (after a fix that must not count): with
+        ``healthy_history`` the window is pre-filled with nominal steps (a start that follows
+        a run of fixes already judged healthy), else the next ``health_window`` fixes decide."""
+        self._prev_fix = None
+        self._steps = [0.0] * (self.cfg.health_window - 1) if healthy_history else []
+        self.healthy = False
+
     def update_gnss(self, xy, sigma=None):
         """Weigh by one GNSS fix (local m) when GNSS is healthy (:meth:`gnss_health`, the
         robust likelihood then guards the rest); re-seed when lost (module docstring).
@@ -344,26 +403,16 @@ class RoadParticles:
         # density of weight on a grid of cluster_radius cells, summed over 3 × 3 neighbours
         R = c.cluster_radius
         cell = np.floor(p / R).astype(np.int64)
-        key = cell[:, 0] * 1_000_003 + cell[:, 1]
-        ukey, inv = np.unique(key, return_inverse=True)
-        cw = np.bincount(inv, weights=w)
-        dens = np.zeros(len(ukey))
-        for dx in (-1, 0, 1):
-            for dy in (-1, 0, 1):
-                q = ukey + dx * 1_000_003 + dy
-                j = np.minimum(np.searchsorted(ukey, q), len(ukey) - 1)
-                dens += np.where(ukey[j] == q, cw[j], 0.0)
-        near = np.abs(cell - cell[np.argmax(dens[inv])]).max(axis=1) <= 1
+        near = densest_cells(cell, w)
         centre_xy = (w[near] @ p[near]) / w[near].sum()
         m = np.sum((p - centre_xy) ** 2, axis=1) < R**2
         if not m.any():
             m = near
         wm = w[m] / w[m].sum()
         mean = wm @ p[m]
-        # snap onto the best segment among the cluster's (the most weight)
-        segs, inv = np.unique(self.seg[m], return_inverse=True)
-        sw = np.bincount(inv, weights=wm)
-        best = int(segs[int(np.argmax(sw))])
+        # snap onto the best segment among the cluster's (the most weight; the lowest index
+        # among equals)
+        best = heaviest(self.seg[m], wm)
         a = self.g.xy[self.g.seg_u[best]]
         u = self.g.xy[self.g.seg_v[best]] - a
         L = max(self.g.seg_len[best], 1e-9)

@@ -11,10 +11,13 @@ A scenario is a dict (or a TOML file) with sections::
                 outages = [[t0, t1], ...],
                 outliers = "seed004" | [{start, duration, sigma_m, kind, tau}, ...]
     [mag]       enabled, noise_nt, hard_iron_nt = [x, y, z], field_model
+    [odometer]  enabled, scale_factor_sigma, quantum_mps, noise_mps, rate_hz (car: wheel speed
+                written to ``odometer.csv``, :class:`selfnav.sensors.OdometerModel`)
 
 Randomness: one ``numpy.random.SeedSequence(seed)`` spawns independent streams for the motion,
-the IMU errors, the GNSS and the magnetometer, so the same seed gives the same files and changing
-one part (say the GNSS σ) leaves the others' random numbers alone.
+the IMU errors, the GNSS and the magnetometer (and one more for the odometer), so the same seed
+gives the same files and changing one part (say the GNSS σ) leaves the others' random numbers
+alone.
 """
 from __future__ import annotations
 
@@ -28,8 +31,7 @@ import numpy as np
 from selfnav import attitude as att
 from selfnav import sensors
 from selfnav.errors import InputError, SelfnavError
-from selfnav.types import ImuData
-from selfnav.types import Trajectory
+from selfnav.types import ImuData, OdometerData, Trajectory
 
 BUILTIN = ("static", "multiposition", "ship", "aircraft", "car")
 
@@ -57,7 +59,9 @@ DEFAULTS = {
 COMMON = {"scenario": {"dt": 0.01, "truth_hz": 10.0}, "motion": {},
           "gnss": {"rate_hz": 1.0, "sigma_v_m": None, "datum": "wgs84", "outages": [],
                    "outliers": [], "spike_rate": 0.0, "spike_sigma_m": 50.0},
-          "mag": {"enabled": False, "noise_nt": 100.0, "hard_iron_nt": None, "field_model": "auto"}}
+          "mag": {"enabled": False, "noise_nt": 100.0, "hard_iron_nt": None, "field_model": "auto"},
+          "odometer": {"enabled": False, "scale_factor_sigma": 0.005, "quantum_mps": 0.01,
+                       "noise_mps": 0.0, "rate_hz": 10.0}}
 
 
 @dataclass
@@ -70,6 +74,9 @@ class Simulation:
     gnss : :class:`selfnav.sensors.GnssFixes` or None
     map_path : the OpenStreetMap file driven on (car) or None
     config : the full scenario dict after defaults
+    route : the :class:`~selfnav.simulate.car.CarRoute` driven (car) or None
+    odometer : :class:`~selfnav.types.OdometerData` (``[odometer] enabled``) or None; its
+        ``meta['scale_factor']`` is the drive's true scale-factor error
     """
 
     name: str
@@ -80,6 +87,7 @@ class Simulation:
     map_path: Path | None = None
     config: dict = field(default_factory=dict)
     route: object = None
+    odometer: object = None
 
 
 def _merge(base: dict, over: dict) -> dict:
@@ -269,6 +277,10 @@ def simulate(spec, *, seed: int = 0, grade: str | None = None, duration: float |
         progress("GNSS")
         rng = np.random.default_rng(s_gnss)
         gnss = _gnss_model(cfg["gnss"], truth, rng).simulate(truth, rng)
+    odo = None
+    if cfg["odometer"]["enabled"]:
+        progress("odometer")
+        odo = _odometer(cfg["odometer"], truth, ss.spawn(1)[0])
     th = float(cfg["scenario"].get("truth_hz") or 0.0)
     if th > 0 and len(truth) > 2:
         step = max(1, int(round(1.0 / (th * exact.dt))))
@@ -277,7 +289,17 @@ def simulate(spec, *, seed: int = 0, grade: str | None = None, duration: float |
         keep[-1] = True
         truth = Trajectory(truth.t[keep], truth.lat[keep], truth.lon[keep], truth.h[keep],
                            truth.velocity_n[keep], truth.C_nb[keep], truth.source)
-    return Simulation(cfg["scenario"]["name"], truth, imu, exact, gnss, map_path, cfg, route)
+    return Simulation(cfg["scenario"]["name"], truth, imu, exact, gnss, map_path, cfg, route, odo)
+
+
+def _odometer(o, truth, seed_seq) -> OdometerData:
+    """Wheel speed of the truth's forward velocity (body y; the car's IMU sits at the rear
+    axle) through :class:`~selfnav.sensors.OdometerModel`."""
+    model = sensors.OdometerModel(float(o["scale_factor_sigma"]), float(o["quantum_mps"]),
+                                  float(o["noise_mps"]), float(o["rate_hz"]))
+    v_fwd = np.einsum("nj,nj->n", truth.C_nb[:, 1, :], truth.velocity_n)
+    t, v, k = model.simulate(truth.t, v_fwd, np.random.default_rng(seed_seq))
+    return OdometerData(t, v, source="simulated odometer", meta={"scale_factor": k})
 
 
 def _interp_attitude(truth, t):
@@ -287,8 +309,9 @@ def _interp_attitude(truth, t):
 
 
 def write_simulation(sim: Simulation, out_dir) -> list[Path]:
-    """Write ``imu.csv``, ``truth.csv``, ``gnss.csv``, ``gnss_errors.csv``, ``mag.csv`` and the
-    map (DESIGN §6 columns), each with a ``# simulated ...`` comment line; returns the paths.
+    """Write ``imu.csv``, ``truth.csv``, ``gnss.csv``, ``gnss_errors.csv``, ``mag.csv``,
+    ``odometer.csv`` (``t, speed_mps``, when simulated) and the map (DESIGN §6 columns), each
+    with a ``# simulated ...`` comment line; returns the paths.
 
     The files are written as one set (:func:`selfnav.io.output.atomic_folder`): into a folder
     that holds an older simulation, an interrupt leaves the old set or the new one, never a
@@ -302,7 +325,7 @@ def write_simulation(sim: Simulation, out_dir) -> list[Path]:
 
 
 #: The files :func:`write_simulation` may write (an older set's files are replaced as a whole).
-SIMULATION_FILES = ("imu.csv", "mag.csv", "truth.csv", "gnss.csv", "gnss_errors.csv",
+SIMULATION_FILES = ("imu.csv", "mag.csv", "truth.csv", "gnss.csv", "gnss_errors.csv", "odometer.csv",
                     "kotka_karhula.osm.pbf", "helsinki_centre.osm.pbf", "MAP_ATTRIBUTION.txt")
 
 
@@ -335,6 +358,15 @@ def _write_simulation_files(sim: Simulation, out: Path) -> list[str]:
                                          f"field model {imu.meta.get('mag_field_model')})"],
                                fmt={"t": "%.6f"}))
     paths.append(write_truth(out / "truth.csv", sim.truth, comments=[tag]))
+    if sim.odometer is not None:
+        o = sim.config["odometer"]
+        paths.append(write_csv(out / "odometer.csv", {"t": sim.odometer.t,
+                                                      "speed_mps": sim.odometer.speed_mps},
+                               comments=[tag, "wheel speed (forward, rear axle), m/s, on the IMU "
+                                         f"clock; scale-factor σ {o['scale_factor_sigma']:g} (this "
+                                         f"drive: {sim.odometer.meta['scale_factor']:+.5f}), quantum "
+                                         f"{o['quantum_mps']:g} m/s"],
+                               fmt={"t": "%.6f", "speed_mps": "%.4f"}))
     g = sim.gnss
     if g is not None:
         paths.append(write_csv(out / "gnss.csv", {
