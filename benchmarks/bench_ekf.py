@@ -18,8 +18,8 @@ from selfnav.api import filter_config
 from selfnav.types import ImuData
 from selfnav.roads.graph import packaged_map, read_roads
 from selfnav.sensors import GnssModel, imu_grade
-from selfnav.simulate.car import car_trajectory
-from selfnav.simulate.inverse import imu_from_trajectory
+from selfnav.sim.car import car_trajectory
+from selfnav.sim.inverse import imu_from_trajectory
 
 
 def main():

@@ -14,7 +14,7 @@ import numpy as np
 from selfnav import latitude as L
 from selfnav.io.csvio import write_csv
 from selfnav.io.readers import read_imu
-from selfnav.simulate.static import static_imu
+from selfnav.sim.static import static_imu
 
 
 def main():

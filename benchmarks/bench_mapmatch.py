@@ -32,8 +32,8 @@ import numpy as np
 
 from selfnav.roads.hmm import HmmMatcher
 from selfnav.roads.graph import packaged_map, project_to_polyline, read_roads
-from selfnav.simulate.car import car_route
-from selfnav.simulate.fleet import fleet_rows, simulate_fleet
+from selfnav.sim.car import car_route
+from selfnav.sim.fleet import fleet_rows, simulate_fleet
 
 MAPS = ("kotka_karhula", "helsinki_centre")
 
@@ -175,7 +175,7 @@ def load():
 
 
 def cached_fleet(g, name, n, seed, sigma):
-    """A simulated fleet (:func:`selfnav.simulate.fleet.simulate_fleet`), cached on disk."""
+    """A simulated fleet (:func:`selfnav.sim.fleet.simulate_fleet`), cached on disk."""
     CACHE.mkdir(parents=True, exist_ok=True)
     f = CACHE / f"fleet_{name}_{n}_{seed}_{sigma[0]:g}-{sigma[1]:g}.pkl"
     if f.exists():

@@ -21,7 +21,7 @@ import numpy as np
 from selfnav import attitude as att
 from selfnav import moving as mv
 from selfnav.moving_driver import navigate_moving
-from selfnav.simulate.ship import exact_body_rates, ship_trajectory
+from selfnav.sim.ship import exact_body_rates, ship_trajectory
 from selfnav.types import AttitudeData, ImuData
 
 

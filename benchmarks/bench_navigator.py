@@ -16,7 +16,7 @@ from selfnav.roads.hmm import match_gnss
 from selfnav.roads.aid import EkfRoadAid
 from selfnav.roads.graph import read_roads
 from selfnav.seed004 import SeedConfig, run_seed
-from selfnav.simulate.scenarios import simulate
+from selfnav.sim.scenarios import simulate
 
 
 def main():

@@ -16,7 +16,7 @@ def main() -> None:
     ap.add_argument("--dt", type=float, default=0.005)
     ap.add_argument("--write", default=None, help="also time writing the files to this folder")
     a = ap.parse_args()
-    from selfnav.simulate.scenarios import simulate, write_simulation
+    from selfnav.sim.scenarios import simulate, write_simulation
 
     simulate("car", seed=0, duration=10.0, dt=a.dt)     # warm-up: imports, map parsing caches
     stages = {}

@@ -29,7 +29,7 @@ from selfnav.roads.aid import EkfRoadAid
 from selfnav.roads.graph import project_to_polyline, read_roads
 from selfnav.ins.align import robust_init
 from selfnav.seed004 import SeedConfig, run_seed
-from selfnav.simulate.scenarios import simulate
+from selfnav.sim.scenarios import simulate
 from selfnav.types import Trajectory
 
 

@@ -1,6 +1,6 @@
 """Monte Carlo of ``selfnav.moving_driver.navigate_moving``: is the reported σ honest?
 
-Simulated ship tracks (``selfnav.simulate.ship`` through the exact inverse strapdown), a sensor
+Simulated ship tracks (``selfnav.sim.ship`` through the exact inverse strapdown), a sensor
 grade of ``selfnav.sensors.GRADES`` on the gyros (its own error model: bias, Gauss-Markov,
 ARW, scale factor, misalignment, quantum), the attitude source of the same grade
 (``selfnav.moving_budget.ATTITUDE_SOURCES``: white noise per sample and a drift ramp), and the
@@ -27,8 +27,8 @@ from selfnav import attitude as att
 from selfnav import sensors
 from selfnav.moving_budget import grade_errors
 from selfnav.moving_driver import navigate_moving
-from selfnav.simulate.inverse import TrajectorySpline, imu_from_trajectory
-from selfnav.simulate.ship import ship_trajectory
+from selfnav.sim.inverse import TrajectorySpline, imu_from_trajectory
+from selfnav.sim.ship import ship_trajectory
 from selfnav.types import AttitudeData, ImuData
 
 

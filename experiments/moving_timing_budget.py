@@ -1,5 +1,5 @@
 """Timing in the moving-base error budget: latitude and longitude error per ms of attitude–gyro
-clock offset, for the ship, aircraft and car motion of ``selfnav.simulate``.
+clock offset, for the ship, aircraft and car motion of ``selfnav.sim``.
 
 For each profile (a perfect IMU, 100 Hz attitude from the truth): the linear sensitivity that
 ``navigate_moving`` reports (``lat_error_per_ms_deg``, RMS after the 3/K start) and a direct
@@ -18,7 +18,7 @@ import numpy as np
 
 from selfnav.moving_budget import grade_table
 from selfnav.moving_driver import navigate_moving
-from selfnav.simulate.scenarios import simulate
+from selfnav.sim.scenarios import simulate
 from selfnav.types import AttitudeData
 
 PROFILES = {

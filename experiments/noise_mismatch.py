@@ -23,7 +23,7 @@ import selfnav
 from selfnav import api
 from selfnav.earth import radii
 from selfnav.sensors import with_outages
-from selfnav.simulate.scenarios import simulate
+from selfnav.sim.scenarios import simulate
 
 FACTORS = (1.0, 0.1, 10.0)
 

@@ -7,8 +7,8 @@ from selfnav import attitude as att
 from selfnav.cli import main
 from selfnav.earth import radii
 from selfnav.sensors import GnssModel, imu_grade
-from selfnav.simulate.car import car_route, car_trajectory
-from selfnav.simulate.inverse import imu_from_trajectory
+from selfnav.sim.car import car_route, car_trajectory
+from selfnav.sim.inverse import imu_from_trajectory
 from selfnav.types import ImuData
 
 

@@ -21,7 +21,7 @@ LAYERS = {
     "earth": 1, "attitude": 1, "datum": 1, "kernels": 1, "igrf": 1, "cluster": 1,
     "io": 2, "sensors": 2,
     "allan": 3, "latitude": 3, "moving": 3, "moving_budget": 3, "ins": 3, "roads": 3, "gnss": 3,
-    "simulate": 3, "moving_driver": 4,
+    "sim": 3, "moving_driver": 4,
     "seed004": 4, "solution": 4, "evaluation": 4, "report": 4, "montecarlo": 4,
     "api": 5, "demo": 6, "campaigns": 6, "cli": 7, "__main__": 8,
 }

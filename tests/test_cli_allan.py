@@ -7,7 +7,7 @@ import numpy as np
 
 from support import run_cli as run
 from selfnav.io.csvio import write_csv
-from selfnav.simulate.static import static_imu
+from selfnav.sim.static import static_imu
 
 
 def _write(path, imu, t=None, scale_w=1.0):

@@ -6,7 +6,7 @@ import pytest
 
 from support import run_cli as run
 from selfnav.io.csvio import write_csv
-from selfnav.simulate.static import static_imu
+from selfnav.sim.static import static_imu
 
 DEGH = np.pi / 180 / 3600
 

@@ -49,7 +49,7 @@ def test_help_lists_choices_and_no_negative_negatives(capsys):
 
 def test_old_format_spelling_still_works_hidden(tmp_path, capsys):
     from selfnav.io.csvio import write_csv
-    from selfnav.simulate.static import static_imu
+    from selfnav.sim.static import static_imu
     import numpy as np
 
     imu = static_imu(np.radians(40.0), 30.0, 0.1, seed=1)

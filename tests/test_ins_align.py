@@ -8,7 +8,7 @@ from selfnav.ins.align import (DEG, DEG_PER_H, align_in_motion, align_static, co
 from selfnav.earth import OMEGA_EARTH, normal_gravity, radii
 from selfnav.errors import SelfnavError
 from selfnav.types import ImuData
-from selfnav.simulate.static import rocking, static_imu
+from selfnav.sim.static import rocking, static_imu
 
 G0 = 9.80665
 LAT = np.radians(45.0)

@@ -7,7 +7,7 @@ from selfnav.earth import enu_offset, offset_to_geodetic
 from selfnav.ins import FilterConfig, InsGnssFilter, calibrate
 from selfnav.ins.guard import FixChain, kinematic_consistent
 from selfnav.sensors import imu_grade
-from selfnav.simulate.scenarios import simulate
+from selfnav.sim.scenarios import simulate
 from selfnav.units import DEG
 
 

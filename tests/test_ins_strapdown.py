@@ -304,8 +304,8 @@ def test_bad_input_is_refused():
 def test_round_trip_of_a_simulated_road_drive():
     """Issue 3 round trip: a 10-min car drive, exact inverse strapdown at 200 Hz, < 0.1 m."""
     from selfnav.roads.graph import packaged_map, read_roads
-    from selfnav.simulate.car import car_trajectory
-    from selfnav.simulate.inverse import imu_from_trajectory
+    from selfnav.sim.car import car_trajectory
+    from selfnav.sim.inverse import imu_from_trajectory
 
     graph = read_roads(packaged_map("kotka_karhula"))
     traj = car_trajectory(graph, duration=600.0, dt=0.01, seed=3)

@@ -6,7 +6,7 @@ import pytest
 
 from selfnav.errors import InputError, SelfnavWarning
 from selfnav.io import imu as I
-from selfnav.simulate.static import static_imu
+from selfnav.sim.static import static_imu
 from selfnav.types import ImuData
 
 

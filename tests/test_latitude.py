@@ -5,7 +5,7 @@ from scipy.spatial.transform import Rotation
 
 from selfnav import latitude as L
 from selfnav.io.readers import read_imu
-from selfnav.simulate.static import multiposition_imu, rocking, static_imu
+from selfnav.sim.static import multiposition_imu, rocking, static_imu
 
 DEGH = L.DEG_PER_H
 ARCSEC = np.radians(1 / 3600)

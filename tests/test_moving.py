@@ -11,7 +11,7 @@ from selfnav.cli import main
 from selfnav.earth import OMEGA_EARTH
 from selfnav.io.csvio import write_csv
 from selfnav.moving_driver import internal_attitude, navigate_moving
-from selfnav.simulate.ship import exact_body_rates, nav_rate_n, ship_trajectory
+from selfnav.sim.ship import exact_body_rates, nav_rate_n, ship_trajectory
 from selfnav.units import DEG_PER_H
 
 INST = dict(rates="instantaneous")   # the exact analytic rates of ship_trajectory are point samples
@@ -399,7 +399,7 @@ def _instantaneous_imu(d):
     """The same motion's gyro rates sampled at the IMU times (point samples, not interval means)."""
     from selfnav.io.readers import read_imu
     from selfnav.io.trajectory import read_truth
-    from selfnav.simulate.inverse import TrajectorySpline
+    from selfnav.sim.inverse import TrajectorySpline
 
     imu = read_imu(d / "imu.csv")
     w = TrajectorySpline(read_truth(d / "truth.csv")).kinematics(imu.t)["omega_ib_b"]
@@ -526,7 +526,7 @@ def test_sigma_is_honest_monte_carlo():
     """Navigation-grade gyros (sensors.GRADES' own error model) and attitude source, random
     offsets in ±50 ms, both row conventions: RMS(error/σ) of latitude within 0.7–1.5."""
     from selfnav import sensors
-    from selfnav.simulate.inverse import TrajectorySpline, imu_from_trajectory
+    from selfnav.sim.inverse import TrajectorySpline, imu_from_trajectory
     from selfnav.types import AttitudeData, ImuData
 
     rng = np.random.default_rng(13)

@@ -11,7 +11,7 @@ from selfnav import ins
 from selfnav.errors import InputError
 from selfnav.io.odometer import has_odometer, read_odometer
 from selfnav.sensors import OdometerModel
-from selfnav.simulate.scenarios import simulate, write_simulation
+from selfnav.sim.scenarios import simulate, write_simulation
 from support import run_cli as run
 
 

@@ -12,7 +12,7 @@ from selfnav.types import GnssData
 
 def _sim_drive(map_name, grade, duration, outlier_s, mag):
     """Simulated car (labelled simulated), seed 4: one white 200 m window from 150 s."""
-    from selfnav.simulate.scenarios import simulate
+    from selfnav.sim.scenarios import simulate
 
     spec = {"scenario": {"kind": "car", "duration": duration, "map": map_name, "dt": 0.01},
             "imu": {"grade": grade}, "mag": {"enabled": mag},
@@ -240,7 +240,7 @@ def test_start_waits_for_fixes_on_the_roads():
     22 and 24; a gentle drift that stays on the roads for the first 40 s, as seed 21's, is not
     caught at the start — the fix check of the road aid then has it)."""
     from selfnav.roads.aid import start_on_roads
-    from selfnav.simulate.scenarios import simulate
+    from selfnav.sim.scenarios import simulate
 
     spec = {"scenario": {"kind": "car", "duration": 260.0, "map": "kotka_karhula"},
             "imu": {"grade": "consumer"},

@@ -10,7 +10,7 @@ from selfnav.cli import main
 from selfnav.roads.fleet import MatchParams, match_batch, match_tracks
 from selfnav.roads.graph import packaged_map, project_to_polyline
 from selfnav.roads.hmm import HmmMatcher
-from selfnav.simulate.fleet import fleet_rows, simulate_fleet
+from selfnav.sim.fleet import fleet_rows, simulate_fleet
 from selfnav.types import GnssData
 
 
@@ -115,7 +115,7 @@ def test_batched_matching_equals_track_by_track(helsinki):
 
 def test_sigma_estimate_follows_the_noise(karhula):
     m = HmmMatcher(karhula)
-    from selfnav.simulate.car import car_route
+    from selfnav.sim.car import car_route
 
     _, route = car_route(karhula, duration=1200.0, dt=5.0, seed=3)
     rng = np.random.default_rng(0)

@@ -12,7 +12,7 @@ from selfnav.io.csvio import read_table, write_csv
 from selfnav.roads.hmm import HmmMatcher, transition_route_distance
 from selfnav.roads.routes import node_distances
 from selfnav.roads.graph import packaged_map, project_to_polyline
-from selfnav.simulate.car import car_route
+from selfnav.sim.car import car_route
 
 
 @pytest.fixture(scope="module")

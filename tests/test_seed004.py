@@ -6,7 +6,7 @@ from selfnav import datum as dm
 from selfnav.types import GnssData
 from selfnav.roads.graph import read_roads
 from selfnav.seed004 import SeedConfig, _tukey, identify, road_points, run_seed
-from selfnav.simulate.scenarios import simulate
+from selfnav.sim.scenarios import simulate
 
 
 @pytest.fixture(scope="module")
@@ -67,7 +67,7 @@ def test_cli_navigate_seed_writes_sk42(drive, tmp_path, capsys):
 
     from selfnav.cli import main
     from selfnav.io.csvio import read_table
-    from selfnav.simulate.scenarios import write_simulation
+    from selfnav.sim.scenarios import write_simulation
 
     sim, _ = drive
     write_simulation(sim, tmp_path)

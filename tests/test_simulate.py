@@ -8,8 +8,8 @@ from selfnav import attitude as att
 from selfnav.cli import main
 from selfnav.io.csvio import read_table
 from selfnav.io.readers import read_imu
-from selfnav.simulate import scenarios as sc
-from selfnav.simulate.aircraft import aircraft_trajectory
+from selfnav.sim import scenarios as sc
+from selfnav.sim.aircraft import aircraft_trajectory
 from selfnav.io.trajectory import read_truth
 
 

@@ -1,4 +1,4 @@
-"""A simulated car on real OpenStreetMap roads (selfnav.simulate.car): stays on the centre line,
+"""A simulated car on real OpenStreetMap roads (selfnav.sim.car): stays on the centre line,
 respects one-ways and its acceleration limits, stops, and gives a consistent trajectory."""
 import numpy as np
 
@@ -7,7 +7,7 @@ import pytest
 
 from selfnav.errors import InputError
 from selfnav.roads.graph import project_to_polyline
-from selfnav.simulate.car import CarTrajectory, car_route, car_trajectory, smooth_path
+from selfnav.sim.car import CarTrajectory, car_route, car_trajectory, smooth_path
 from selfnav.types import Trajectory
 
 A_MAX, LAT_MAX, V_MAX = 2.0, 2.5, 20.0

@@ -4,8 +4,8 @@ import pytest
 
 from selfnav import attitude as att
 from selfnav import earth
-from selfnav.simulate.inverse import TrajectorySpline, imu_from_trajectory
-from selfnav.simulate.static import static_imu
+from selfnav.sim.inverse import TrajectorySpline, imu_from_trajectory
+from selfnav.sim.static import static_imu
 from selfnav.types import Trajectory
 
 LAT0, LON0, H0 = np.radians(50.45), np.radians(30.52), 100.0
@@ -161,7 +161,7 @@ def test_constant_rate_turn_matches_ecef_oracle():
 @pytest.mark.slow
 def test_round_trip_through_strapdown_turn_and_aircraft():
     from selfnav.ins import strapdown as sd
-    from selfnav.simulate.aircraft import aircraft_trajectory
+    from selfnav.sim.aircraft import aircraft_trajectory
 
     c = _Circle()
     t = np.arange(0.0, 600.0 + 1e-9, 0.01)
@@ -195,7 +195,7 @@ def test_static_hour_round_trip_below_a_millimetre():
 
 def test_spline_kinematics_are_consistent():
     """Velocity from the spline is the derivative of its position (central difference)."""
-    from selfnav.simulate.aircraft import aircraft_trajectory
+    from selfnav.sim.aircraft import aircraft_trajectory
 
     sp = TrajectorySpline(aircraft_trajectory(300.0, 0.05, LAT0, LON0, 500.0))
     ts = np.linspace(10, 290, 50)

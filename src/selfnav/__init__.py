@@ -41,7 +41,7 @@ _API = {
     "latitude_error_budget": "selfnav.api", "evaluate_report": "selfnav.api",
     "map_coverage": "selfnav.api", "check_map_covers": "selfnav.api", "imu_gaps": "selfnav.api",
     "simulate_files": "selfnav.api", "run_montecarlo": "selfnav.api",
-    "simulate": "selfnav.simulate.scenarios", "MovingBaseNavigator": "selfnav.moving",
+    "simulate": "selfnav.sim.scenarios", "MovingBaseNavigator": "selfnav.moving",
     "navigate_moving": "selfnav.moving_driver",
     "ImuData": "selfnav.types", "GnssData": "selfnav.types", "Trajectory": "selfnav.types",
     "AttitudeData": "selfnav.types",

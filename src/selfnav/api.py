@@ -493,9 +493,9 @@ def imu_gaps(imu: ImuData, min_missing: int = 1) -> list:
 
 def simulate_files(spec, out_dir, *, seed: int = 0, grade: str | None = None,
                    duration: float | None = None, dt: float | None = None, progress=None):
-    """Simulate a scenario (:func:`selfnav.simulate.scenarios.simulate`) and write its files
+    """Simulate a scenario (:func:`selfnav.sim.scenarios.simulate`) and write its files
     into the folder ``out_dir`` as one set; returns ``(simulation, paths)``."""
-    from selfnav.simulate.scenarios import simulate, write_simulation
+    from selfnav.sim.scenarios import simulate, write_simulation
 
     sim = simulate(spec, seed=seed, grade=grade, duration=duration, dt=dt, progress=progress)
     if progress is not None:

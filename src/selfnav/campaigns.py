@@ -31,7 +31,7 @@ from selfnav import api, sensors
 from selfnav.evaluation import evaluate
 from selfnav.montecarlo import register_pair
 from selfnav.roads.graph import project_to_polyline, read_roads, road_polylines
-from selfnav.simulate.scenarios import simulate
+from selfnav.sim.scenarios import simulate
 
 MAPS = ("kotka_karhula", "helsinki_centre")
 

@@ -51,7 +51,7 @@ def navigation_demo(duration: float = 420.0, seeds=(1, 2, 3)) -> dict:
     from selfnav.roads.aid import EkfRoadAid
     from selfnav.roads.graph import read_roads
     from selfnav.ins.align import robust_init
-    from selfnav.simulate.scenarios import simulate
+    from selfnav.sim.scenarios import simulate
 
     spec = {"scenario": {"kind": "car", "duration": duration, "map": "kotka_karhula", "dt": 0.01},
             "imu": {"grade": "consumer"},

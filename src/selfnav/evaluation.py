@@ -223,7 +223,7 @@ def evaluate(truth: Trajectory, solution: Trajectory, *, roads=None,
     Parameters
     ----------
     truth, solution : Trajectory
-        WGS-84 geodetic, as :func:`selfnav.simulate.trajectory.read_truth` returns them.
+        WGS-84 geodetic, as :func:`selfnav.sim.trajectory.read_truth` returns them.
     roads : list of (M_i, 2) arrays, optional
         Road polylines as ``(lat, lon)`` in rad (WGS-84); enables road-relative along/cross.
     """

@@ -145,7 +145,7 @@ def run_static_latitude(seed: int, params: dict) -> dict:
     Angles returned in degrees.
     """
     from selfnav.latitude import G_STD, cramer_rao_bound, estimate_latitude
-    from selfnav.simulate.static import static_imu
+    from selfnav.sim.static import static_imu
 
     rng = np.random.default_rng(seed)
     lat = np.radians(rng.uniform(-params["max_lat_deg"], params["max_lat_deg"]))

@@ -1,6 +1,6 @@
 """A simulated fleet of floating cars, logged the way fleet loggers log (issue 14).
 
-Each track is a piece of a drive of :func:`selfnav.simulate.car.car_route` on a real
+Each track is a piece of a drive of :func:`selfnav.sim.car.car_route` on a real
 OpenStreetMap graph, stationary for a while at the start, sampled every ``period`` seconds (drawn
 per track) with irregular intervals, time stamps rounded to the second (so two positions can fall in
 the same second), white GNSS noise of σ drawn per track, and now and then a position logged twice
@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from selfnav.simulate.car import car_route
+from selfnav.sim.car import car_route
 
 
 @dataclass

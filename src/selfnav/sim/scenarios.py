@@ -74,7 +74,7 @@ class Simulation:
     gnss : :class:`selfnav.sensors.GnssFixes` or None
     map_path : the OpenStreetMap file driven on (car) or None
     config : the full scenario dict after defaults
-    route : the :class:`~selfnav.simulate.car.CarRoute` driven (car) or None
+    route : the :class:`~selfnav.sim.car.CarRoute` driven (car) or None
     odometer : :class:`~selfnav.types.OdometerData` (``[odometer] enabled``) or None; its
         ``meta['scale_factor']`` is the drive's true scale-factor error
     """
@@ -132,8 +132,8 @@ def _static_truth(t, lat, lon, h, C_nb):
 
 def _motion(cfg, rng_seed, progress):
     """Trajectory and error-free IMU of a scenario; returns (truth, imu, map_path, route)."""
-    from selfnav.simulate import static as st
-    from selfnav.simulate.inverse import imu_from_trajectory
+    from selfnav.sim import static as st
+    from selfnav.sim.inverse import imu_from_trajectory
 
     sc, mo = cfg["scenario"], cfg["motion"]
     kind, dt, T = sc["kind"], float(sc["dt"]), float(sc["duration"])
@@ -155,16 +155,16 @@ def _motion(cfg, rng_seed, progress):
         return truth, imu, None, None
     map_path, route = None, None
     if kind == "ship":
-        from selfnav.simulate.ship import ship_trajectory
+        from selfnav.sim.ship import ship_trajectory
 
         traj = ship_trajectory(T, dt, lat, lon, h=h, seed=rng_seed, **mo)
     elif kind == "aircraft":
-        from selfnav.simulate.aircraft import aircraft_trajectory
+        from selfnav.sim.aircraft import aircraft_trajectory
 
         traj = aircraft_trajectory(T, dt, lat, lon, h, seed=rng_seed, **mo)
     else:  # car
         from selfnav.roads.graph import packaged_map, read_roads
-        from selfnav.simulate.car import car_route
+        from selfnav.sim.car import car_route
 
         m = str(sc.get("map", "kotka_karhula"))
         map_path = packaged_map(m) if m in ("kotka_karhula", "helsinki_centre") else Path(m)

@@ -8,7 +8,7 @@ The attitude is given analytically, so the body rates are exact:
 with ``ω_nb^b`` from the Euler-angle rates by seed 002 (6) (ψ = −heading,
 :func:`selfnav.attitude.euler_rates_to_body`) and ``ω_in^n = ω_ie^n + ω_en^n`` from
 :func:`selfnav.earth.nav_rate_n`. These are *instantaneous* rates; the simulator's IMU files
-(:func:`selfnav.simulate.inverse.imu_from_trajectory`) hold interval means.
+(:func:`selfnav.sim.inverse.imu_from_trajectory`) hold interval means.
 """
 from __future__ import annotations
 

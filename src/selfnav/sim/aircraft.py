@@ -9,7 +9,7 @@ accelerations and body rates are continuous. Then, in ENU::
 
 integrated with the trapezoidal rule on the output grid. Attitude: pitch ``γ + α`` (constant
 angle of attack), roll the bank of a coordinated turn ``atan(V ψ̇ / g)``, heading ``H`` (no
-sideslip). The sensors come from :func:`selfnav.simulate.inverse.imu_from_trajectory`.
+sideslip). The sensors come from :func:`selfnav.sim.inverse.imu_from_trajectory`.
 """
 from __future__ import annotations
 
