@@ -12,7 +12,7 @@ is no independent reference). The navigator gets the files as a user would give 
 * ``outage3``: the same 3 minutes with no fixes (the dead-reckoning bound);
 * ``shift±0.3``: the IMU stamps shifted by ±0.3 s (the time offset must be found again).
 
-    python experiments/drive_0708.py [DATA_FOLDER] [--scan] [--grades]
+    python experiments/drive_0708.py [DATA_FOLDER] [--scan [--white] [--gm] [--drift] [--outage3] [-v]] [--grades]
 
 ``--scan`` places the outlier window at six places with three draws each (positions only);
 ``--grades`` runs every ``--grade``. Figures go to README and docs/ekf.md.
@@ -95,7 +95,8 @@ def run(folder=DEFAULT_FOLDER, scenario="all", *, start=200.0, seed=0, velocity=
 
 
 def placement_scan(folder=DEFAULT_FOLDER, kinds=("white", "gm", "drift", "outage3"),
-                   starts=(100, 150, 200, 250, 300, 350), seeds=(0, 1, 2), velocity="keep"):
+                   starts=(100, 150, 200, 250, 300, 350), seeds=(0, 1, 2), velocity="keep",
+                   verbose=False):
     """The 3-minute window at six places and three outlier draws (one placement is one sample
     of the dead reckoning's luck). Returns ``{kind: (N, 4) window RMS, window max, outside
     RMS, max 30 s after the window}``."""
@@ -105,6 +106,10 @@ def placement_scan(folder=DEFAULT_FOLDER, kinds=("white", "gm", "drift", "outage
         for st in starts:
             for sd in (seeds if kind in ("white", "drift", "drift-jump") else seeds[:1]):
                 r = run(folder, kind, start=st, seed=sd, velocity=velocity)
+                if verbose:
+                    print(f"  {kind} start {st} draw {sd}: window RMS {r['window_rms_m']:.1f} "
+                          f"max {r['window_max_m']:.1f}, outside RMS {r['outside_rms_m']:.2f}, "
+                          f"30 s after {r['after_max_m']:.2f}", flush=True)
                 rows.append((r["window_rms_m"], r["window_max_m"], r["outside_rms_m"],
                              r["after_max_m"]))
         out[kind] = np.array(rows)
@@ -122,13 +127,16 @@ def _fmt(name, m):
 
 
 def main(argv):
-    args = [a for a in argv[1:] if not a.startswith("--")]
+    args = [a for a in argv[1:] if not a.startswith("-")]
     folder = Path(args[0]) if args else DEFAULT_FOLDER
     if "--scan" in argv:
         # positions only: the outlier defence proper (with a clean velocity the windows are
         # bridged by it, 0.2–1 m at the 200 s placement)
         for vel in ("drop",):
-            for kind, r in placement_scan(folder, velocity=vel).items():
+            kinds = [k for k in ("white", "gm", "drift", "outage3") if f"--{k}" in argv] or \
+                ("white", "gm", "drift", "outage3")
+            for kind, r in placement_scan(folder, kinds=kinds, velocity=vel,
+                                          verbose="-v" in argv).items():
                 print(f"{kind:8s} vel={vel:4s} {len(r)} runs: window RMS median "
                       f"{np.median(r[:, 0]):.1f} m (worst {r[:, 0].max():.1f}), window max median "
                       f"{np.median(r[:, 1]):.1f} m (worst {r[:, 1].max():.1f}; "

@@ -164,3 +164,56 @@ def test_velocity_from_positions():
     np.testing.assert_allclose(v[:, 1], 3.0, rtol=1e-6)
     np.testing.assert_allclose(v[:, 0], 4.0, rtol=1e-5)
     np.testing.assert_allclose(v[:, 2], 0.0, atol=1e-12)
+
+
+def test_levelling_map_is_the_tilt_a_biased_accelerometer_leaves():
+    """Levelled on f_b + b_a, the attitude is tilted by ψ = A x_b (x_b the filter's bias error,
+    to first order);
+    and in the filter's own error model that correlated error has no horizontal velocity-error
+    rate (the two cancel until the vehicle turns)."""
+    from selfnav.ins import ekf, FilterConfig
+    from selfnav.ins.align import levelling_map
+
+    g = 9.80665
+    rng = np.random.default_rng(3)
+    for _ in range(10):
+        r, p, hd = rng.uniform(-0.3, 0.3), rng.uniform(-0.3, 0.3), rng.uniform(0, 2 * np.pi)
+        C_nb = att.dcm_nb_from_euler(r, p, hd)
+        b = rng.normal(scale=0.02, size=3)                       # m/s², a consumer MEMS
+        r2, p2 = levelling(C_nb @ np.array([0.0, 0.0, g]) + b)
+        C2_bn = att.dcm_nb_from_euler(r2, p2, hd).T
+        # C̃_bn = (I − [ψ×]) C_bn
+        S = np.eye(3) - C2_bn @ C_nb
+        psi = np.array([S[2, 1], S[0, 2], S[1, 0]])
+        A = levelling_map(C_nb.T)
+        # the filter's bias error state is estimate − truth (F_vb = −C_bn): x_b = −b here
+        x_b = -b
+        np.testing.assert_allclose(psi[:2], (A @ x_b)[:2], atol=2e-3 * np.abs(b).max() / g + 1e-9)
+        # the filter's F: δv̇ = F_vψ ψ + F_vb b = 0 horizontally for ψ = A b
+        flt = ekf.InsGnssFilter(FilterConfig(), 0.0, 1.0, 0.4, 0.0, np.zeros(3), C_nb)
+        flt._f_n = np.array([0.0, 0.0, g])
+        F = flt._F()
+        dv = F[3:6, 6:9] @ (A @ x_b) + F[3:6, 12:15] @ x_b
+        assert np.max(np.abs(dv[:2])) < 1e-12
+
+
+def test_in_motion_start_carries_the_levelling_correlation():
+    """A simulated car parked, then driving (labelled simulated): the start covariance
+    correlates tilt and accelerometer bias as levelling_map says."""
+    from selfnav.ins import FilterConfig
+    from selfnav.ins.align import init_from_gnss
+    from selfnav.ins.navigator import StreamingNavigator
+    from selfnav.sim.scenarios import simulate
+
+    spec = {"scenario": {"kind": "car", "duration": 120.0, "dt": 0.01, "map": "kotka_karhula"},
+            "motion": {"hold_start": 30.0}, "imu": {"grade": "industrial"},
+            "gnss": {"sigma_m": 3.0, "rate_hz": 1.0, "spike_rate": 0.0, "outliers": []}}
+    sim = simulate(spec, seed=5)
+    g = sim.gnss.as_gnss()
+    cfg = FilterConfig()
+    init = init_from_gnss(sim.imu, g, cfg, np.full(len(g.t), 3.0))
+    assert "tilt_bias_map" in init
+    nav = StreamingNavigator(cfg, init, record=False, smoother=False)
+    P = nav.flt.P
+    A = np.asarray(init["tilt_bias_map"])
+    np.testing.assert_allclose(P[6:9, 12:15], A @ P[12:15, 12:15], atol=1e-15)

@@ -92,3 +92,27 @@ def test_mounting_angles_are_estimated(graph):
         late = t > t[0] + 120
         rms.append(float(np.sqrt(np.mean(np.sum(dp[late] ** 2, 1)))))
     assert rms[0] < rms[1], (np.degrees(est), rms)
+
+
+def test_window_test_allows_the_acceleration_error_the_covariance_admits():
+    """Six fixes whose offset from the INS displacement grows as ½ a t² (a levelling error of
+    a fresh start): inconsistent for a test that knows only a velocity error, consistent once
+    the covariance's acceleration σ enters — and still inconsistent for a 20 m jump."""
+    from types import SimpleNamespace
+
+    from selfnav.earth import offset_to_geodetic
+    from selfnav.ins.guard import window_consistent
+
+    lat0, lon0 = np.radians(60.0), np.radians(25.0)
+    a = 0.3
+    fixes, buf = [], []
+    for k in range(6):
+        t = float(k)
+        la, lo, h = offset_to_geodetic(lat0, lon0, 0.0, np.array([10.0 * t, 0.0, 0.0]))
+        fixes.append(SimpleNamespace(t=t, lat=la, lon=lo, h=h, sigma_h=0.3, sigma_v=0.5))
+        buf.append((k, np.array([10.0 * t - 0.5 * a * t * t, 0.0, 0.0])))
+    assert not window_consistent(buf, fixes, 0.05)
+    assert window_consistent(buf, fixes, 0.05, s_acc=a)
+    la, lo, h = offset_to_geodetic(lat0, lon0, 0.0, np.array([70.0, 0.0, 0.0]))
+    fixes[-1] = SimpleNamespace(t=5.0, lat=la, lon=lo, h=h, sigma_h=0.3, sigma_v=0.5)
+    assert not window_consistent(buf, fixes, 0.05, s_acc=a)

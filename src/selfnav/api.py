@@ -203,7 +203,7 @@ def navigate(imu: ImuData, gnss: GnssData | None, roads=None, *, method: str = "
         if est is not None:
             imu = imu.shifted(est[0])
             applied += est[0]
-            cfg = cfg.updated(time_offset=True, time_offset_sigma=max(3 * est[1], 0.01))
+            cfg = cfg.updated(time_offset=True, time_offset_sigma=max(est[1], 0.01))
             stats["imu_time_offset_prepass_s"] = est[0]
         else:
             cfg = cfg.updated(time_offset=True, time_offset_sigma=0.1)

@@ -408,6 +408,29 @@ def _consistent_run(p, t, sig, cfg):
     return bool(np.all(acc < cfg.init.max_accel * dt.max() + 3 * np.sqrt(6) * np.max(sig) / dt.min()))
 
 
+def _still_second(imu, j, n, g):
+    """Samples ``j … j+n`` look still: gyro norm below 1 °/s, |f| steady to 0.05 m/s² and
+    within 0.1 m/s² of gravity."""
+    w = imu.omega_ib_b[j:j + n]
+    fn = np.linalg.norm(imu.f_ib_b[j:j + n], axis=1)
+    return bool(np.max(np.linalg.norm(w, axis=1)) < np.radians(1.0) and np.std(fn) < 0.05
+                and abs(np.mean(fn) - g) < 0.1)
+
+
+def levelling_map(C_bn):
+    """``A`` with ``ψ_E,N = A b_a``: the levelling error an accelerometer bias leaves.
+
+    Levelled on the biased specific force, the attitude makes the computed specific force
+    vertical, so the horizontal velocity-error rate ``[f^n×]ψ − C_bn b_a`` (the filter's error
+    model) is zero at that instant: ``g ψ_E = (C_bn b_a)_N``, ``−g ψ_N = (C_bn b_a)_E``. The
+    tilt and the horizontal bias are one error until the vehicle turns; an initial covariance
+    without this correlation makes the filter believe a horizontal acceleration error of
+    ``√(g² σ_ψ² + σ_b²)`` that is not there. ``C_bn`` is the attitude at levelling.
+    """
+    G = np.array([[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 0.0]]) / 9.80665
+    return G @ np.asarray(C_bn, dtype=float)
+
+
 def _still_before(imu, t_end, gnss=None, g=9.8, window=1.0, lookback=30.0, accel_bias=0.0):
     """Last still second within ``lookback`` s before ``t_end``: ``(index, a_bound)`` or None.
 
@@ -426,15 +449,17 @@ def _still_before(imu, t_end, gnss=None, g=9.8, window=1.0, lookback=30.0, accel
     for j in range(j1 - n, j0 - 1, -max(n // 4, 1)):
         if j < 0:
             break
-        w = imu.omega_ib_b[j:j + n]
-        fn = np.linalg.norm(imu.f_ib_b[j:j + n], axis=1)
-        if not (np.max(np.linalg.norm(w, axis=1)) < np.radians(1.0) and np.std(fn) < 0.05
-                and abs(np.mean(fn) - g) < 0.1):
+        if not _still_second(imu, j, n, g):
             continue
         # |f| = sqrt(g² + a²) ≈ g + a²/2g: an acceleration below this hides in the |f| test
         a_bound = np.sqrt(2.0 * g * (0.1 + accel_bias))
         if gnss is not None:
-            m = (gnss.t >= imu.t[j] - 1.0) & (gnss.t <= imu.t[min(j + n, len(imu.t) - 1)] + 1.0)
+            # the whole stop (this second and the still seconds before it, within the
+            # lookback): a long stop bounds a hidden acceleration tightly, a ∝ 1/span²
+            js = j
+            while js - n >= j0 and _still_second(imu, js - n, n, g):
+                js -= n
+            m = (gnss.t >= imu.t[js] - 1.0) & (gnss.t <= imu.t[min(j + n, len(imu.t) - 1)] + 1.0)
             if m.sum() >= 2:
                 d = enu_offset(gnss.lat[m][0], gnss.lon[m][0], 0.0, gnss.lat[m][-1],
                                 gnss.lon[m][-1], 0.0)
@@ -520,6 +545,10 @@ def init_from_gnss(imu, gnss: GnssData, cfg: FilterConfig, sig_h):
             roll, pitch, _ = att.euler_from_dcm_bn(C_bn)
             dur = imu.t[j1] - imu.t[je - 1]
             s_tilt = np.radians(0.3) + np.arctan(a_bound / 9.8) + float(np.max(sbg)) * dur
+            # the attitude at levelling, in the true navigation frame: the start attitude
+            # rotated back by the gyros' rotation since (the body rotation is frame-free)
+            C_bn0 = att.dcm_nb_from_euler(roll, pitch, np.arctan2(v0[0], v0[1])).T
+            out["tilt_bias_map"] = levelling_map(C_bn0 @ att.quat_to_dcm(q[-1]).T)
         else:
             # straight and at constant speed: the specific force is gravity alone
             j = np.searchsorted(imu.t, gnss.t[sl])
@@ -527,6 +556,8 @@ def init_from_gnss(imu, gnss: GnssData, cfg: FilterConfig, sig_h):
             roll = np.arctan2(-f_b[0], f_b[2])
             pitch = np.arctan2(f_b[1], np.hypot(f_b[0], f_b[2]))
             s_tilt = np.radians(4.0)
+            out["tilt_bias_map"] = levelling_map(
+                att.dcm_nb_from_euler(roll, pitch, np.arctan2(v0[0], v0[1])).T)
         s_hdg = np.arctan2(sv, speed) + np.radians(2.0)
         out.update(C_nb=att.dcm_nb_from_euler(roll, pitch, hdg),
                    sigmas=([2 * sp, 2 * sp, 3 * sp], [2 * sv, 2 * sv, 2 * sv + 0.2],

@@ -365,11 +365,12 @@ def white_scale(sus, out):
     return float(max(s_diff, s_level))
 
 
-def window_consistent(buf, fixes, sv, trend=False):
+def window_consistent(buf, fixes, sv, trend=False, s_acc=0.0):
     """The fixes of the window share one offset from the INS displacement (χ², 0.999).
 
     ``d_i = z_i − (INS displacement)_i`` is the same for every fix of a healthy window (the INS
-    drift over a few seconds is ``sv·Δt``); the test is ``Σ |d_i − d̄|²/σ_i² ≤ χ²(3(W−1))``.
+    drift over a few seconds is ``sv·Δt + ½ s_acc·Δt²``, ``s_acc`` the horizontal acceleration
+    error the covariance allows: a levelling error, an accelerometer bias); the test is ``Σ |d_i − d̄|²/σ_i² ≤ χ²(3(W−1))``.
     Stronger than pairwise tests against errors that wander between fixes (Gauss–Markov
     outliers), and P cannot weaken it. ``trend=True`` fits an offset *and a rate* (the
     velocity error of a long dead reckoning, which its covariance may understate; the rate is
@@ -388,7 +389,8 @@ def window_consistent(buf, fixes, sv, trend=False):
         f = fixes[k]
         z = enu_offset(f0.lat, f0.lon, f0.h, f.lat, f.lon, f.h)
         d.append(z - (snap - s0))
-        drift2 = (sv * (f.t - tm)) ** 2
+        dt = f.t - tm
+        drift2 = (sv * abs(dt) + 0.5 * s_acc * dt * dt) ** 2
         var.append([f.sigma_h ** 2 + drift2, f.sigma_h ** 2 + drift2, f.sigma_v ** 2 + drift2])
     d, var = np.array(d), np.array(var)
     w = 1.0 / var

@@ -40,7 +40,7 @@ from selfnav.errors import SelfnavError
 from selfnav.ins.align import init_from_gnss
 from selfnav.ins.calibrate import NoiseAdapter
 from selfnav.ins.config import CHI2_1_999, CHI2_2_999, FilterConfig
-from selfnav.ins.ekf import (IBG, IP, IR, IV, PACK, InsGnssFilter, nis, pack_state,
+from selfnav.ins.ekf import (IBA, IBG, IP, IR, IV, PACK, InsGnssFilter, nis, pack_state,
                              rts_smooth, unpack_states)
 from selfnav.ins.guard import (DeadReckoningGuard, FixChain, kinematic_consistent,
                                track_agrees, white_scale, window_consistent)
@@ -146,6 +146,14 @@ class StreamingNavigator:
             flt.P[IR, IR] = np.diag(np.square(sp))
             flt.P[IV, IV] = np.diag(np.square(sv))
             flt.P[IP, IP] = np.diag(np.square(sa))
+        if "tilt_bias_map" in init:
+            # levelled on biased accelerometers: tilt and horizontal bias are one error
+            # (:func:`selfnav.ins.align.levelling_map`)
+            A = np.asarray(init["tilt_bias_map"], dtype=float)
+            Pb = flt.P[IBA, IBA].copy()
+            flt.P[IP, IP] += A @ Pb @ A.T
+            flt.P[IP, IBA] = A @ Pb
+            flt.P[IBA, IP] = (A @ Pb).T
         if "gyro_bias" in init:
             flt.bg = np.array(init["gyro_bias"], dtype=float)
             flt.P[IBG, IBG] = np.diag(np.square(init["gyro_bias_sigma"]))
@@ -441,7 +449,7 @@ class StreamingNavigator:
             if self.suspect:
                 ok, reason, dx = self._suspect_fix(k, r, H, R, ok, s_vel)
             elif len(self.win) > 1:
-                win_ok = window_consistent(self.win, self.fixes, s_vel)
+                win_ok = window_consistent(self.win, self.fixes, s_vel, s_acc=self._s_acc(flt))
                 if ok and not win_ok:
                     ok, reason = False, "window test"
             if not self.suspect and shadow_rej is not None:
@@ -573,6 +581,17 @@ class StreamingNavigator:
                 if add is not None:
                     self._widened = add if self._widened is None else self._widened + add
             self._drag = None
+
+    @staticmethod
+    def _s_acc(flt):
+        """Horizontal acceleration error σ the covariance allows, m/s²: a levelling error
+        (g ψ_E, g ψ_N) and the accelerometer bias. Large just after an in-motion alignment
+        with a pessimistic prior; centimetres per s² once converged."""
+        P = flt.P
+        g = 9.8
+        tilt = g * g * 0.5 * (P[IP, IP][0, 0] + P[IP, IP][1, 1])
+        bias = np.trace(P[IBA, IBA]) / 3.0
+        return float(np.sqrt(max(tilt + bias, 0.0)))
 
     def _suspect_fix(self, k, r, H, R, ok, s_vel):
         """A fix in suspect mode: re-acquire, or use white outliers with their robust scale."""
