@@ -378,7 +378,14 @@ class InsGnssFilter:
         self._q_white = np.zeros(self.nx)
         self._q_white[IV] = q[IV]
         self._q_white[IP] = q[IP]
-        self._q_slow = q - self._q_white
+        # the geometry and timing of the installation (mounting, lever arm, time offset,
+        # odometer scale) are not IMU noise: λ does not scale them (a λ pumped up by a
+        # diverging start let the time offset jump by seconds in one update)
+        self._q_fixed = np.zeros(self.nx)
+        for sl in (lay.mu, lay.lever, lay.toff, lay.odo):
+            if sl is not None:
+                self._q_fixed[sl] = q[sl]
+        self._q_slow = q - self._q_white - self._q_fixed
 
     # ------------------------------------------------------------------ model
     def _q_density(self):
@@ -449,7 +456,7 @@ class InsGnssFilter:
         """Covariance over ``T`` seconds at the current state (sub-steps of ``cov_step``)."""
         nsub = max(1, int(math.ceil(T / self.cfg.cov_step)))
         h = T / nsub
-        q = (self._q_white + self.bias_scale * self._q_slow) * (self.q_scale * h)
+        q = (self._q_white + self.bias_scale * self._q_slow) * (self.q_scale * h) + self._q_fixed * h
         _propagate(self.P, self._Phi_acc, self._F(), q, h, nsub)
 
     # ------------------------------------------------------------------ updates
