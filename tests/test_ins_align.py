@@ -217,26 +217,3 @@ def test_in_motion_start_carries_the_levelling_correlation():
     P = nav.flt.P
     A = np.asarray(init["tilt_bias_map"])
     np.testing.assert_allclose(P[6:9, 12:15], A @ P[12:15, 12:15], atol=1e-15)
-
-
-def test_a_consumer_imu_at_a_stop_is_still():
-    """A consumer IMU's 1 °/s gyro bias and 0.2 m/s² accelerometer bias are not motion: the
-    in-motion start levels on the stop and takes the gyro bias from it (simulated; before,
-    the stop was missed and the start took a 4° tilt σ and no gyro bias)."""
-    from selfnav.earth import normal_gravity
-    from selfnav.ins.align import _still_before
-    from selfnav.ins.calibrate import grade_noise
-    from selfnav.sim.scenarios import simulate
-
-    spec = {"scenario": {"kind": "car", "duration": 60.0, "dt": 0.01, "map": "kotka_karhula"},
-            "motion": {"hold_start": 30.0}, "imu": {"grade": "consumer"},
-            "gnss": {"sigma_m": 3.0, "rate_hz": 1.0, "spike_rate": 0.0, "outliers": []}}
-    found = 0
-    prior = grade_noise("consumer")
-    for seed in (11, 12, 19):
-        sim = simulate(spec, seed=seed)
-        g = sim.gnss.as_gnss()
-        gg = float(normal_gravity(g.lat[0], 0.0))
-        found += _still_before(sim.imu, 31.0, g, gg, accel_bias=prior.accel_bias_sigma,
-                               gyro_bias=prior.gyro_bias_sigma) is not None
-    assert found == 3

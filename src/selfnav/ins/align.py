@@ -408,17 +408,13 @@ def _consistent_run(p, t, sig, cfg):
     return bool(np.all(acc < cfg.init.max_accel * dt.max() + 3 * np.sqrt(6) * np.max(sig) / dt.min()))
 
 
-def _still_second(imu, j, n, g, bias_w=0.0, bias_f=0.0):
-    """Samples ``j … j+n`` look still: the gyros within 1 °/s of their mean and that mean
-    within 1 °/s of zero, |f| steady to 0.05 m/s² and within 0.1 m/s² of gravity — each mean
-    test widened by three times the sensor's turn-on bias σ (``bias_w`` rad/s, ``bias_f``
-    m/s²): a consumer gyro's 1 °/s bias or a 0.2 m/s² accelerometer bias is not motion."""
+def _still_second(imu, j, n, g):
+    """Samples ``j … j+n`` look still: gyro norm below 1 °/s, |f| steady to 0.05 m/s² and
+    within 0.1 m/s² of gravity."""
     w = imu.omega_ib_b[j:j + n]
-    w_mean = w.mean(axis=0)
     fn = np.linalg.norm(imu.f_ib_b[j:j + n], axis=1)
-    return bool(np.max(np.linalg.norm(w - w_mean, axis=1)) < np.radians(1.0)
-                and np.linalg.norm(w_mean) < np.radians(1.0) + 3.0 * bias_w
-                and np.std(fn) < 0.05 and abs(np.mean(fn) - g) < 0.1 + 3.0 * bias_f)
+    return bool(np.max(np.linalg.norm(w, axis=1)) < np.radians(1.0) and np.std(fn) < 0.05
+                and abs(np.mean(fn) - g) < 0.1)
 
 
 def levelling_map(C_bn):
@@ -435,16 +431,14 @@ def levelling_map(C_bn):
     return G @ np.asarray(C_bn, dtype=float)
 
 
-def _still_before(imu, t_end, gnss=None, g=9.8, window=1.0, lookback=30.0, accel_bias=0.0,
-                  gyro_bias=0.0):
+def _still_before(imu, t_end, gnss=None, g=9.8, window=1.0, lookback=30.0, accel_bias=0.0):
     """Last still second within ``lookback`` s before ``t_end``: ``(index, a_bound)`` or None.
 
     ``a_bound`` (m/s²) is the largest constant acceleration the tests below could have missed:
     the levelling error it allows, ``atan(a_bound/g)``, goes into the tilt σ.
 
-    Still: :func:`_still_second` (the rates steady and near zero, |f| steady and near gravity,
-    both allowing the sensors' turn-on biases; a constant acceleration is steady too), and the
-    GNSS fixes over the whole stop not moving. The
+    Still: gyro norm below 1 °/s, |f| steady to 0.05 m/s² and within 0.1 m/s² of gravity (a
+    constant acceleration is steady too), and the GNSS fixes around it not moving. The
     accelerometers cannot tell a gentle constant acceleration (below ~1.4 m/s²) from rest, and
     a 10 m receiver cannot either: the tilt σ of this path assumes a good receiver or a real
     stop.
@@ -455,16 +449,15 @@ def _still_before(imu, t_end, gnss=None, g=9.8, window=1.0, lookback=30.0, accel
     for j in range(j1 - n, j0 - 1, -max(n // 4, 1)):
         if j < 0:
             break
-        if not _still_second(imu, j, n, g, gyro_bias, accel_bias):
+        if not _still_second(imu, j, n, g):
             continue
-        # |f| = sqrt(g² + a²) ≈ g + b_z + a²/2g: an acceleration below this hides in the |f|
-        # test (its tolerance and a vertical bias of the same 3σ)
-        a_bound = np.sqrt(2.0 * g * (0.1 + 6.0 * accel_bias))
+        # |f| = sqrt(g² + a²) ≈ g + a²/2g: an acceleration below this hides in the |f| test
+        a_bound = np.sqrt(2.0 * g * (0.1 + accel_bias))
         if gnss is not None:
             # the whole stop (this second and the still seconds before it, within the
             # lookback): a long stop bounds a hidden acceleration tightly, a ∝ 1/span²
             js = j
-            while js - n >= j0 and _still_second(imu, js - n, n, g, gyro_bias, accel_bias):
+            while js - n >= j0 and _still_second(imu, js - n, n, g):
                 js -= n
             m = (gnss.t >= imu.t[js] - 1.0) & (gnss.t <= imu.t[min(j + n, len(imu.t) - 1)] + 1.0)
             if m.sum() >= 2:
@@ -530,8 +523,7 @@ def init_from_gnss(imu, gnss: GnssData, cfg: FilterConfig, sig_h):
         hdg = np.arctan2(v0[0], v0[1])
         out = dict(t=t0, lat=lat, lon=lon, h=coef[0, 2], velocity_n=v0)
         still = _still_before(imu, t0, gnss, float(normal_gravity(lat, coef[0, 2])),
-                              accel_bias=cfg.imu.accel_bias_sigma,
-                              gyro_bias=cfg.imu.gyro_bias_sigma)
+                              accel_bias=cfg.imu.accel_bias_sigma)
         if still is not None:
             j0, a_bound = still
             js, je = j0, j0 + int(round(1.0 / imu.dt))
