@@ -325,8 +325,9 @@ def write_simulation(sim: Simulation, out_dir) -> list[Path]:
 
 
 #: The files :func:`write_simulation` may write (an older set's files are replaced as a whole).
-SIMULATION_FILES = ("imu.csv", "mag.csv", "truth.csv", "gnss.csv", "gnss_errors.csv", "odometer.csv",
-                    "kotka_karhula.osm.pbf", "helsinki_centre.osm.pbf", "MAP_ATTRIBUTION.txt")
+SIMULATION_FILES = ("imu.csv", "mag.csv", "truth.csv", "gnss.csv", "gnss_errors.csv",
+                    "odometer.csv", "kotka_karhula.osm.pbf", "helsinki_centre.osm.pbf",
+                    "MAP_ATTRIBUTION.txt")
 
 
 def _write_simulation_files(sim: Simulation, out: Path) -> list[str]:
