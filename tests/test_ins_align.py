@@ -217,3 +217,31 @@ def test_in_motion_start_carries_the_levelling_correlation():
     P = nav.flt.P
     A = np.asarray(init["tilt_bias_map"])
     np.testing.assert_allclose(P[6:9, 12:15], A @ P[12:15, 12:15], atol=1e-15)
+
+
+def test_a_drive_off_second_does_not_inherit_the_stops_bound():
+    """20 s parked, then 1 m/s² forward (exact synthetic IMU, GNSS σ 3 m): whatever second
+    the search takes as still, the tilt it allows covers its error — a drive-off second
+    (which the |f| test cannot tell from rest) is not joined to the stop before it."""
+    from selfnav.earth import offset_to_geodetic
+    from selfnav.ins.align import _still_before
+    from selfnav.types import GnssData
+
+    g, a, dt = 9.8, 1.0, 0.01
+    t = np.arange(dt, 30.0 + dt / 2, dt)
+    moving = t > 20.0
+    f = np.zeros((len(t), 3))
+    f[:, 2] = g
+    f[moving, 1] = a
+    imu = ImuData(t, np.zeros((len(t), 3)), f)
+    tg = np.arange(1.0, 30.5, 1.0)
+    north = np.where(tg > 20.0, 0.5 * a * (tg - 20.0) ** 2, 0.0)
+    rng = np.random.default_rng(1)
+    lat0, lon0 = np.radians(60.0), np.radians(25.0)
+    la, lo, h = offset_to_geodetic(lat0, lon0, 0.0, np.column_stack(
+        [rng.normal(0, 3.0, len(tg)), north + rng.normal(0, 3.0, len(tg)), np.zeros(len(tg))]))
+    gnss = GnssData(tg, la, lo, h, np.full(len(tg), 3.0), None, None, "synthetic")
+    for t_end in (21.5, 22.0, 22.5):
+        j, a_bound = _still_before(imu, t_end, gnss, g)
+        tilt_error = np.arctan(f[j:j + 100, 1].mean() / g)
+        assert np.arctan(a_bound / g) + np.radians(0.3) >= tilt_error, (t_end, imu.t[j], a_bound)

@@ -431,6 +431,10 @@ def levelling_map(C_bn):
     return G @ np.asarray(C_bn, dtype=float)
 
 
+#: seconds of one stop agree on the direction of the specific force to this, rad
+STOP_TILT_AGREE = np.radians(0.2)
+
+
 def _still_before(imu, t_end, gnss=None, g=9.8, window=1.0, lookback=30.0, accel_bias=0.0):
     """Last still second within ``lookback`` s before ``t_end``: ``(index, a_bound)`` or None.
 
@@ -456,8 +460,16 @@ def _still_before(imu, t_end, gnss=None, g=9.8, window=1.0, lookback=30.0, accel
         if gnss is not None:
             # the whole stop (this second and the still seconds before it, within the
             # lookback): a long stop bounds a hidden acceleration tightly, a ∝ 1/span²
+            # — only seconds whose specific force points the same way as this one's: a
+            # second at the start of an acceleration passes the |f| test, and a run that
+            # joined it to the stop before would claim the stop's bound for it
             js = j
+            u = imu.f_ib_b[j:j + n].mean(axis=0)
+            u = u / np.linalg.norm(u)
             while js - n >= j0 and _still_second(imu, js - n, n, g):
+                v = imu.f_ib_b[js - n:js].mean(axis=0)
+                if float(np.dot(u, v)) < np.cos(STOP_TILT_AGREE) * float(np.linalg.norm(v)):
+                    break
                 js -= n
             m = (gnss.t >= imu.t[js] - 1.0) & (gnss.t <= imu.t[min(j + n, len(imu.t) - 1)] + 1.0)
             if m.sum() >= 2:
