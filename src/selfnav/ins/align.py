@@ -427,7 +427,7 @@ def levelling_map(C_bn):
     without this correlation makes the filter believe a horizontal acceleration error of
     ``√(g² σ_ψ² + σ_b²)`` that is not there. ``C_bn`` is the attitude at levelling.
     """
-    G = np.array([[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 0.0]]) / 9.80665
+    G = np.array([[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 0.0]]) / G_STD
     return G @ np.asarray(C_bn, dtype=float)
 
 

@@ -45,6 +45,7 @@ from selfnav.ins.ekf import (IBA, IBG, IP, IR, IV, PACK, InsGnssFilter, nis, pac
 from selfnav.ins.guard import (DeadReckoningGuard, FixChain, kinematic_consistent,
                                track_agrees, white_scale, window_consistent)
 from selfnav.types import GnssData, Trajectory
+from selfnav.units import G0
 
 #: per-fix status codes of the fix log and the solution rows
 STATUS = {-1: "before-init", 0: "rejected", 1: "used", 2: "used-h", 3: "used-v",
@@ -588,7 +589,7 @@ class StreamingNavigator:
         (g ψ_E, g ψ_N) and the accelerometer bias. Large just after an in-motion alignment
         with a pessimistic prior; centimetres per s² once converged."""
         P = flt.P
-        g = 9.8
+        g = G0
         tilt = g * g * 0.5 * (P[IP, IP][0, 0] + P[IP, IP][1, 1])
         bias = np.trace(P[IBA, IBA]) / 3.0
         return float(np.sqrt(max(tilt + bias, 0.0)))

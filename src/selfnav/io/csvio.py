@@ -74,6 +74,16 @@ class _LineNumbers:
         return a if dtype is None else a.astype(dtype)
 
 
+def refuse_numeric_header(path, names, required, row):
+    """One line when the first non-comment line of a table holds numbers, not column names."""
+    try:
+        float(names[0])
+    except ValueError:
+        return
+    raise InputError(path, "the first line holds numbers, not column names: add a header row "
+                     f"({', '.join(required)})", row=row)
+
+
 def read_table(path, required, optional=(), *, numeric=True):
     """Read a CSV table with a header row.
 
@@ -110,12 +120,7 @@ def read_table(path, required, optional=(), *, numeric=True):
     header_idx = line_no - 1
     delim = "," if "," in header_line else None
     names = [h.strip().lower() for h in (header_line.split(delim) if delim else header_line.split())]
-    try:
-        float(names[0])
-        raise InputError(path, "the first line holds numbers, not column names: add a header row "
-                         f"({', '.join(required)})", row=header_idx + 1)
-    except ValueError:
-        pass
+    refuse_numeric_header(path, names, required, header_idx + 1)
     index = {}
     for k, n in enumerate(names):
         index.setdefault(n, k)

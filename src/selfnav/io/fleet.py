@@ -33,7 +33,7 @@ import numpy as np
 
 from selfnav import datum as dm
 from selfnav.errors import InputError, SelfnavWarning
-from selfnav.io.csvio import open_text, parse_numbers, parse_times
+from selfnav.io.csvio import open_text, parse_numbers, parse_times, refuse_numeric_header
 from selfnav.types import GnssData
 
 #: schema column -> accepted spellings, in order of preference (compared lower case, without
@@ -193,12 +193,7 @@ def read_csv_columns(path, required, optional=()):
         raise InputError(path, "is empty (no header row and no data)")
     delim = _sniff_delimiter(raw[h])
     names = next(csv.reader([raw[h]], delimiter=delim)) if delim else raw[h].split()
-    try:
-        float(names[0])
-        raise InputError(path, "the first line holds numbers, not column names: add a header "
-                         f"row ({', '.join(required)})", row=h + 1)
-    except ValueError:
-        pass
+    refuse_numeric_header(path, names, required, h + 1)
     found = _pick_columns(path, names, required, optional)
     keep = [k for k in range(h + 1, len(raw))
             if raw[k].strip() and not raw[k].lstrip().startswith("#")]
