@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 from selfnav.cli import main
@@ -228,6 +228,7 @@ def test_navigate_command(data, capsys):
 @given(args=st.lists(st.sampled_from(
     ["--dt", "--duration", "--grade", "--seed", "0", "-1", "5", "0.001", "1e9", "nan", "x",
      "perfect", "consumer", "static", "car"]), max_size=4))
+@example(args=["--seed", "-1"])           # was a numpy traceback
 def test_simulate_arguments(args, capsys):
     with tempfile.TemporaryDirectory() as d:
         out = Path(d) / "sim"

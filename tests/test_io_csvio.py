@@ -4,7 +4,7 @@ import gzip
 import pytest
 
 from selfnav.errors import InputError
-from selfnav.io.csvio import check_positive, check_time, read_table
+from selfnav.io.csvio import check_positive, check_time, open_text, read_table
 from selfnav.io.readers import read_imu
 
 
@@ -40,3 +40,12 @@ def test_check_positive_names_the_row(tmp_path):
     check_time(tab)
     with pytest.raises(InputError, match=r"line 3, column 'sigma_m': sigma_m 0 must be positive"):
         check_positive(tab, "sigma_m")
+
+
+def test_truncated_gzip_is_one_line_not_an_interrupt(tmp_path):
+    """Two bytes of gzip magic: gzip raises EOFError, which the command line would take for
+    Ctrl-D ("interrupted", exit 130) — found by the CLI property test."""
+    p = tmp_path / "sol.csv"
+    p.write_bytes(b"\x1f\x8b")
+    with pytest.raises(InputError, match="gzip"):
+        open_text(p)

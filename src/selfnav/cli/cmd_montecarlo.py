@@ -29,7 +29,7 @@ def register(app: typer.Typer) -> None:
         workers: opt.Workers = 2,
         scheduler: opt.Scheduler = None,
         out: opt.out_file("Per-run results, .csv or .parquet.", required=False) = None,
-        seed: Annotated[int, typer.Option("--seed", help="Master seed (run i gets "
+        seed: Annotated[int, typer.Option("--seed", min=0, help="Master seed, ≥ 0 (run i gets "
                                           "SeedSequence(seed, spawn_key=(i,))).")] = 0,
         sets: Optional[List[str]] = typer.Option(None, "--set", help="Scenario parameter "
                                                  "KEY=VALUE (repeatable; see --list)."),

@@ -172,5 +172,5 @@ Workers = at_least(0, "--workers", help="Local Dask workers (processes, one thre
 Scheduler = Annotated[Optional[str], typer.Option(
     "--scheduler", metavar="ADDRESS", help="Address of an existing Dask scheduler (tcp://host:8786); "
                         "--workers is then ignored.")]
-Seed = Annotated[int, typer.Option("--seed", help="Random seed: the same seed gives the same "
-                                                  "result.")]
+Seed = Annotated[int, typer.Option("--seed", min=0, help="Random seed (≥ 0): the same seed "
+                                                         "gives the same result.")]

@@ -31,7 +31,7 @@ def open_text(path: Path) -> str:
     if path.suffix == ".gz" or raw[:2] == b"\x1f\x8b":
         try:
             raw = gzip.decompress(raw)
-        except OSError:
+        except (OSError, EOFError):      # EOFError: truncated (the CLI would take it for Ctrl-D)
             raise InputError(path, "looks gzip-compressed but cannot be decompressed") from None
     try:
         return raw.decode("utf-8-sig")
