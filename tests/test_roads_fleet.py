@@ -217,7 +217,8 @@ def test_parquet_out_and_seconds_in(karhula, tmp_path, capsys):
                  "--out", str(out), "--sigma-m", "8"]) == 0
     capsys.readouterr()
     tab = pq.read_table(out)
-    assert tab.column_names == ["t", "lat_deg", "lon_deg", "h_m", "cross_m", "way_id", "matched"]
+    assert tab.column_names == ["t", "lat_deg", "lon_deg", "h_m", "cross_m", "way_id", "matched",
+                                "match_p", "piece"]
     assert tab.num_rows == len(tracks[0].t)
     assert tab.column("t").to_pylist()[0] == f"{tracks[0].t[0] + 1000.5:.1f}"
     assert set(tab.column("way_id").to_pylist()) <= set(karhula.seg_way.tolist())

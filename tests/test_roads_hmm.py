@@ -143,12 +143,19 @@ def test_cli_match_json_and_output(maps, tmp_path, capsys):
                "--out", str(out), "--json"])
     assert rc == 0
     summary = json.loads(capsys.readouterr().out)
-    assert summary["fixes"] == len(traj.t) and summary["map_segments"] == 1514
-    assert summary["matched_share"] == 1.0
-    tab = read_table(out, ("t", "lat_deg", "lon_deg", "cross_m"))
+    # the map as matching reads it: every drivable way (1677 directed segments, not only the
+    # 1514 of the strongly connected core)
+    assert summary["fixes"] == len(traj.t) and summary["map_segments"] == 1677
+    tab = read_table(out, ("t", "lat_deg", "lon_deg", "cross_m", "matched", "match_p"))
     x, y = g.to_local(np.radians(tab["lat_deg"]), np.radians(tab["lon_deg"]))
     _, cross, _ = project_to_polyline(np.column_stack([x, y]), route.polyline)
     assert np.mean(np.abs(cross) < 5.0) >= 0.95
+    ok = tab["matched"] == 1
+    assert summary["matched_share"] == pytest.approx(ok.mean()) and ok.mean() > 0.9
+    assert np.mean(np.abs(cross[ok]) < 5.0) >= 0.97
+    assert np.all((tab["match_p"] >= 0) & (tab["match_p"] <= 1))
+    q, = summary["track_quality"]
+    assert q["breaks"] == summary["breaks"] == 0 and q["fixes"] == len(traj.t)
     assert summary["mean_correction_m"] == pytest.approx(np.mean(tab["cross_m"]), abs=1e-3)
     assert "OpenStreetMap" in out.read_text().splitlines()[2]
 

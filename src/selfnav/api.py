@@ -24,7 +24,7 @@ from selfnav.latitude import LatitudeResult
 from selfnav.latitude import estimate_latitude as _estimate_latitude
 from selfnav.latitude import estimate_latitude_multiposition
 from selfnav.roads.aid import EkfRoadAid, start_on_roads
-from selfnav.roads.graph import RoadGraph, read_roads
+from selfnav.roads.graph import RoadGraph, read_match_roads, read_roads
 from selfnav.io.fleet import Fleet, read_fleet
 from selfnav.roads.fleet import (FleetRun, MatchParams, match_files, match_track,
                                  match_tracks)
@@ -316,14 +316,18 @@ def match(gnss: GnssData, roads, *, sigma_m: float | None = None,
     """GNSS-only map matching (hidden Markov model, Viterbi) onto OpenStreetMap roads.
 
     ``sigma_m``: the GNSS σ where the fixes carry none; None estimates it from the fixes
-    (Newson & Krumm's median distance to the nearest road). Returns a :class:`Solution` whose
+    (Newson & Krumm's median distance to the nearest road). ``roads``: a path is read as map
+    matching needs it (:func:`selfnav.roads.graph.read_match_roads`: every drivable way, unjoined
+    ways snapped); a :class:`RoadGraph` is used as it is. Returns a :class:`Solution` whose
     rows are the fixes moved onto the roads, with the columns ``cross_m`` (distance moved),
-    ``way_id`` (OpenStreetMap way) and ``matched`` (a road within the search radius), and the
-    matcher's summary in ``stats``.
+    ``way_id`` (OpenStreetMap way), ``matched`` (the match is plausible), ``match_p``
+    (posterior of the matched road) and ``piece`` (piece of chain between breaks), and the
+    matcher's summary (with the track's quality: share matched, breaks, median cross) in
+    ``stats``.
     """
     if sigma_m is not None and not sigma_m > 0:
         raise SelfnavError(f"sigma_m must be positive, got {sigma_m}")
-    graph = _as_roads(roads)
+    graph = roads if isinstance(roads, RoadGraph) else read_match_roads(roads)
     m = MatchParams(sigma_m, radius_m, beta_m).matcher(graph)
     tm = match_track(m, gnss.source or "track", gnss, auto_sigma=sigma_m is None)
     if tm.error:
@@ -339,7 +343,8 @@ def _match_solution(gnss: GnssData, res, m) -> Solution:
     stats = {**res.summary(), "map_nodes": m.graph.n_nodes, "map_segments": m.graph.n_segments,
              "sigma_m": m.sigma, "beta_m": m.beta, "radius_m": m.radius}
     return Solution(tr, None, {"cross_m": res.moved, "way_id": res.way,
-                               "matched": res.in_radius}, stats, "hmm", res)
+                               "matched": res.matched, "match_p": res.match_p,
+                               "piece": res.piece}, stats, "hmm", res)
 
 
 def match_fleet(tracks, roads, *, sigma_m: float | None = None, radius_m: float | None = None,

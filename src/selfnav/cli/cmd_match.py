@@ -76,7 +76,7 @@ def register(app: typer.Typer) -> None:
                                       ".osm.pbf."),
         out: Path = typer.Option(..., "--out", help="Matched fixes, .csv or .parquet: "
                                  "[track_id,] t, lat_deg, lon_deg, h_m, cross_m, way_id, "
-                                 "matched."),
+                                 "matched, match_p, piece."),
         route_out: Optional[Path] = typer.Option(None, "--route-out", help="Each track's driven "
                                                  "route as GeoJSON (OSM way ids)."),
         workers: Optional[int] = typer.Option(None, "--workers", help="Local Dask workers "
@@ -100,8 +100,10 @@ def register(app: typer.Typer) -> None:
         as_json: bool = typer.Option(False, "--json", help="Print one JSON object."),
     ):
         """Match GNSS fixes to the road network (hidden Markov model, Viterbi): every fix gets
-        a position on a road. A file with a track_id column (or several files) is a fleet: each
-        track is matched on its own, in parallel on Dask when large."""
+        a position on a road, a match_p (posterior of that road) and a matched flag (the match
+        is plausible); the chain breaks where no transition is. A file with a track_id column
+        (or several files) is a fleet: each track is matched on its own, in parallel on Dask
+        when large."""
         from selfnav.roads.fleet import match_files
 
         if sigma_m is not None and sigma_m <= 0:
@@ -117,9 +119,14 @@ def register(app: typer.Typer) -> None:
         tracks = (f"{s['tracks_matched']} of {s['tracks']} tracks, " if s["tracks"] > 1 else "")
         print(f"{tracks}{s['fixes']} fixes matched to {Path(s['map']).name} "
               f"({s['map_nodes']} nodes, {s['map_segments']} directed segments) -> {s['out']}")
-        print(f"  road within {s['radius_m']:.0f} m: {100 * s['matched_share']:.1f} %   "
+        print(f"  matched (plausible): {100 * s['matched_share']:.1f} %   "
               f"correction mean {s['mean_correction_m']:.2f} m, max "
-              f"{s['max_correction_m']:.2f} m   restarts {s['restarts']}")
+              f"{s['max_correction_m']:.2f} m   breaks {s['breaks']}"
+              + (f"   tracks below 90 % matched: {s['tracks_below_90pct_matched']}"
+                 if s["tracks"] > 1 else ""))
+        if s["map_snapped"]:
+            print(f"  map: {s['map_snapped']} dead ends of unjoined ways snapped within "
+                  f"{s['snap_m']:g} m")
         print(f"  {s['seconds']:.2f} s end to end ({s['fixes_per_second'] or 0:,.0f} fixes/s; "
               f"matching {s['matcher_fixes_per_second'] or 0:,.0f} fixes/s per core, "
               f"{s['mode']}{'' if not s['workers'] else ', %d workers' % s['workers']})")

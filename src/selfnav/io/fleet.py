@@ -483,8 +483,8 @@ class FleetWriter:
     """Matched fixes to CSV (``#`` comments, header) or Parquet, streamed track by track and
     moved into place only when complete (nothing half-written on failure).
 
-    Columns: ``[track_id,] t, lat_deg, lon_deg, h_m, cross_m, way_id, matched``; ``t`` is the
-    input's text (seconds or ISO-8601, as it came).
+    Columns: ``[track_id,] t, lat_deg, lon_deg, h_m, cross_m, way_id, matched, match_p,
+    piece``; ``t`` is the input's text (seconds or ISO-8601, as it came).
     """
 
     def __init__(self, path, *, track_id: bool, comments=()):
@@ -511,7 +511,8 @@ class FleetWriter:
         self._stack = contextlib.ExitStack()
         self._tmp = self._stack.enter_context(atomic_path(self.path))
         names = (["track_id"] if self.track_id else []) + ["t", "lat_deg", "lon_deg", "h_m",
-                                                           "cross_m", "way_id", "matched"]
+                                                           "cross_m", "way_id", "matched",
+                                                           "match_p", "piece"]
         if self.parquet:
             self._batch = []
             self._pq = None
@@ -522,19 +523,23 @@ class FleetWriter:
             self._fh.write(",".join(names) + "\n")
         return self
 
-    def write(self, track_id, t_text, lat_deg, lon_deg, h_m, cross_m, way_id, matched):
+    def write(self, track_id, t_text, lat_deg, lon_deg, h_m, cross_m, way_id, matched,
+              match_p=None, piece=None):
         """Rows of one track (arrays of equal length)."""
         n = len(t_text)
         self.rows += n
+        match_p = np.full(n, np.nan) if match_p is None else np.asarray(match_p, float)
+        piece = np.zeros(n, np.int64) if piece is None else np.asarray(piece, np.int64)
         if self.parquet:
             self._batch.append((track_id, t_text, lat_deg, lon_deg, h_m, cross_m, way_id,
-                                matched))
+                                matched, match_p, piece))
             if sum(len(b[1]) for b in self._batch) >= 65536:
                 self._flush()
             return
         cols = [list(t_text), _fmt(lat_deg, "%.9f"), _fmt(lon_deg, "%.9f"), _fmt(h_m, "%.3f"),
                 _fmt(cross_m, "%.3f"), [str(int(w)) for w in way_id],
-                ["1" if m else "0" for m in matched]]
+                ["1" if m else "0" for m in matched], _fmt(match_p, "%.4f"),
+                [str(int(p)) for p in piece]]
         if self.track_id:
             tid = _csv_field(str(track_id))
             cols.insert(0, [tid] * n)
@@ -546,13 +551,12 @@ class FleetWriter:
 
         if not self._batch:
             return
-        cat = {k: [] for k in ("track_id", "t", "lat_deg", "lon_deg", "h_m", "cross_m",
-                               "way_id", "matched")}
+        num = ("lat_deg", "lon_deg", "h_m", "cross_m", "way_id", "matched", "match_p", "piece")
+        cat = {k: [] for k in ("track_id", "t", *num)}
         for tid, *cols in self._batch:
             cat["track_id"] += [str(tid)] * len(cols[0])
             cat["t"] += list(cols[0])
-            for k, v in zip(("lat_deg", "lon_deg", "h_m", "cross_m", "way_id", "matched"),
-                            cols[1:]):
+            for k, v in zip(num, cols[1:]):
                 cat[k].append(np.asarray(v))
         arrays = {k: (pa.array(v) if k in ("track_id", "t") else pa.array(np.concatenate(v)))
                   for k, v in cat.items()}

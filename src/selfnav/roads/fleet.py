@@ -24,8 +24,8 @@ from typing import Callable, Iterable, Iterator
 import numpy as np
 
 from selfnav.errors import SelfnavError
-from selfnav.roads.graph import RoadGraph, read_roads
-from selfnav.roads.hmm import HmmMatcher, MatchResult
+from selfnav.roads.graph import RoadGraph, read_match_roads
+from selfnav.roads.hmm import MATCHED_GATE, MATCHED_P, HmmMatcher, MatchResult
 from selfnav.roads.routes import driven_route
 from selfnav.types import GnssData
 
@@ -88,7 +88,7 @@ def process_matcher(roads, params: MatchParams) -> HmmMatcher:
     key = (str(Path(roads).resolve()) if graph is None else id(graph), params)
     m = _MATCHERS.get(key)
     if m is None or (graph is not None and m.graph is not graph):
-        graph = roads if isinstance(roads, RoadGraph) else read_roads(roads)
+        graph = roads if isinstance(roads, RoadGraph) else read_match_roads(roads)
         if len(_MATCHERS) > 4:
             _MATCHERS.clear()
         m = _MATCHERS[key] = params.matcher(graph)
@@ -358,7 +358,7 @@ def match_files(gnss, map_path, out, *, route_out=None, sigma_m: float | None = 
 
     The output keeps each input row (in time order within its track, repeated stamps sharing
     their merged fix), the input's ``track_id`` and time text; columns ``t, lat_deg, lon_deg,
-    h_m, cross_m, way_id, matched``. ``route_out``: the driven routes as GeoJSON. A track that
+    h_m, cross_m, way_id, matched, match_p, piece``. ``route_out``: the driven routes as GeoJSON. A track that
     cannot be matched gets one warning line naming it and its file line and is left out; if no
     track can be matched the call fails and writes nothing.
 
@@ -378,7 +378,7 @@ def match_files(gnss, map_path, out, *, route_out=None, sigma_m: float | None = 
     files = fleet_files(paths)
     out_key = datum_key(out_datum) if out_datum else "wgs84"
     fleet = read_fleet(files, datum=datum_key(gnss_datum) if gnss_datum else "wgs84")
-    graph = read_roads(map_path)
+    graph = read_match_roads(map_path)
     if swapped_columns(graph, [tr.gnss for tr in fleet.tracks]):
         warnings.warn(f"{names_of(files)}: latitude and longitude look swapped (no fix lies on "
                       "the map as given, most do exchanged): read exchanged", SelfnavWarning,
@@ -405,10 +405,16 @@ def match_files(gnss, map_path, out, *, route_out=None, sigma_m: float | None = 
     comments = [f"selfnav match: GNSS {names} matched to roads of {Path(map_path).name} (HMM, "
                 f"Newson & Krumm); datum {datum_name}",
                 "cross_m: distance from the fix to its matched road position, m; way_id: "
-                "OpenStreetMap way; matched: 1 if a road lies within the search radius",
-                "map data (c) OpenStreetMap contributors, ODbL"]
+                "OpenStreetMap way; matched: 1 where the match is plausible (match_p >= "
+                f"{MATCHED_P:g}, the fix within {MATCHED_GATE:g} sigma of the road, not a lone "
+                "fix between breaks); match_p: posterior probability of the matched road; "
+                "piece: piece of the track between breaks of the chain (0, 1, ...)",
+                "map data (c) OpenStreetMap contributors, ODbL",
+                f"map: {graph.n_nodes} nodes, {graph.n_segments} directed segments (every "
+                f"drivable way), {graph.snapped} dead ends of unjoined ways snapped within "
+                f"{graph.snap_m:g} m"]
     n_fix = n_in = n_restart = matched_tracks = n_out = 0
-    sigmas = []
+    sigmas, quality = [], []
     sum_moved, max_moved, track_s = 0.0, 0.0, 0.0
     with contextlib.ExitStack() as stack:
         w = stack.enter_context(FleetWriter(out, track_id=fleet.has_track_id or len(files) > 1,
@@ -423,7 +429,8 @@ def match_files(gnss, map_path, out, *, route_out=None, sigma_m: float | None = 
             res = tm.result
             matched_tracks += 1
             n_fix += len(res.t)
-            n_in += int(res.in_radius.sum())
+            n_in += int(res.matched.sum())
+            quality.append({"track_id": tr.track_id, **res.quality()})
             n_restart += int(res.restart.sum()) - 1
             sum_moved += float(res.moved.sum())
             max_moved = max(max_moved, float(res.moved.max()))
@@ -435,11 +442,13 @@ def match_files(gnss, map_path, out, *, route_out=None, sigma_m: float | None = 
             if out_key != "wgs84":
                 lat, lon, h = convert(lat, lon, np.nan_to_num(h), "wgs84", out_key)
             w.write(tr.track_id, tr.t_text, np.degrees(lat), np.degrees(lon), h, res.moved[f],
-                    res.way[f], res.in_radius[f])
+                    res.way[f], res.matched[f], res.match_p[f], res.piece[f])
             if rw is not None:
                 rw.write(tr.track_id, tm.route or [],
                          {"fixes": len(res.t), "length_m": round(tm.route_length_m, 1),
-                          "matched_share": round(float(res.in_radius.mean()), 4)})
+                          "matched_share": round(float(res.matched.mean()), 4),
+                          "breaks": res.breaks,
+                          "median_cross_m": round(float(np.median(res.moved)), 2)})
         if not matched_tracks:
             first = failures[0][1] if failures else "no track in the input"
             if len(fleet.tracks) == 1:
@@ -461,7 +470,10 @@ def match_files(gnss, map_path, out, *, route_out=None, sigma_m: float | None = 
             "tracks_failed": len(failures), "rows": w.rows, "fixes": n_fix,
             "matched_share": n_in / n_fix if n_fix else 0.0,
             "mean_correction_m": sum_moved / n_fix if n_fix else 0.0,
-            "max_correction_m": max_moved, "restarts": n_restart, "outside_map": n_out,
+            "max_correction_m": max_moved, "restarts": n_restart, "breaks": n_restart,
+            "outside_map": n_out, "map_snapped": graph.snapped, "snap_m": graph.snap_m,
+            "tracks_below_90pct_matched": sum(q["matched_share"] < 0.9 for q in quality),
+            "track_quality": quality,
             "time_form": fleet.time_form, "seconds": elapsed,
             "fixes_per_second": n_fix / elapsed if elapsed > 0 else None,
             "match_seconds": track_s,

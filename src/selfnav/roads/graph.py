@@ -292,6 +292,8 @@ class RoadGraph:
         self._way_codes, self._seg_way_code = np.unique(self.seg_way, return_inverse=True)
         self._way_dir_key = (self._seg_way_code * 2
                              + (self.seg_u < self.seg_v)).astype(np.int64)
+        self.snapped = 0          # dead ends joined by read_roads' snap tolerance
+        self.snap_m = 0.0
         self._tree = None
         self._grid = None
         self._nx = None
@@ -500,7 +502,150 @@ class RoadGraph:
         return a + d * (np.asarray(along, float) / L)[..., None]
 
 
-def read_roads(path, *, highway=DRIVABLE, strongly_connected=True, center=None) -> RoadGraph:
+#: Default snap tolerance of map matching's map (:func:`read_match_roads`), m: a way whose end
+#: node is not shared with any other way is joined to a road passing this close.
+SNAP_M = 5.0
+
+
+def _snap_dead_ends(xy, su, sv, sw, snap_m):
+    """Join the dead ends of unjoined ways to the road they touch (OpenStreetMap ways that do not
+    share a node where they meet).
+
+    A *dead end* is a node with a single neighbour. Each dead end within ``snap_m`` of a node of
+    another way is merged into the nearest such node; else, within ``snap_m`` of a segment of
+    another way, that segment is split at the foot point and the dead end merged there. Only
+    ends are snapped: two ways that cross without a shared node (a bridge) stay apart.
+
+    Parameters
+    ----------
+    xy : (N, 2) node positions, m
+    su, sv, sw : (M,) directed segments (node indices) and their way ids
+
+    Returns
+    -------
+    xy : (N', 2) node positions (split points appended)
+    su, sv, sw : the segments after snapping (merged ends relabelled, split segments replaced by
+        their two halves)
+    n_snapped : int
+        Dead ends joined.
+    new_nodes : int
+        Split points added (appended at the end of ``xy``).
+    """
+    from scipy.spatial import cKDTree
+
+    n = len(xy)
+    und = np.unique(np.sort(np.column_stack([su, sv]), axis=1), axis=0)
+    deg = np.bincount(und.ravel(), minlength=n)
+    ends = np.flatnonzero(deg == 1)
+    if snap_m <= 0 or not len(ends):
+        return xy, su, sv, sw, 0, 0
+    # the ways of each node (a node may belong to several)
+    node_way = {}
+    for u, v, w in zip(su.tolist(), sv.tolist(), sw.tolist()):
+        node_way.setdefault(u, set()).add(w)
+        node_way.setdefault(v, set()).add(w)
+    kd = cKDTree(xy)
+    rep = np.arange(n)
+    # undirected segments (one per node pair) for the split search, near each end
+    import shapely
+
+    a, b = xy[und[:, 0]], xy[und[:, 1]]
+    tree = shapely.STRtree(shapely.linestrings(np.stack([a, b], axis=1)))
+    q_end, q_seg = tree.query(shapely.points(xy[ends]), predicate="dwithin", distance=snap_m)
+    seg_near = {}
+    for qe, qs in zip(q_end.tolist(), q_seg.tolist()):
+        seg_near.setdefault(int(ends[qe]), []).append(qs)
+    splits = {}                                  # undirected segment -> [(along, end node)]
+    n_snapped = 0
+    target = set()                               # nodes something was merged into
+    for e in ends.tolist():
+        if e in target:                          # another end joined this one already
+            continue
+        ways_e = node_way.get(e, set())
+        best, best_d = -1, np.inf
+        for m in kd.query_ball_point(xy[e], snap_m):
+            if m == e or rep[m] != m or node_way.get(m, set()) & ways_e:
+                continue
+            d = float(np.hypot(*(xy[m] - xy[e])))
+            if d < best_d:
+                best, best_d = m, d
+        if best >= 0:
+            rep[e] = best
+            target.add(best)
+            n_snapped += 1
+            continue
+        # the nearest segment of another way
+        near = np.asarray([k for k in seg_near.get(e, []) if not (
+            (node_way.get(int(und[k, 0]), set()) & node_way.get(int(und[k, 1]), set()))
+            & ways_e)], np.int64)
+        if not len(near):
+            continue
+        s, _, d, _ = project_points_to_segments(np.repeat(xy[e][None], len(near), 0), a[near],
+                                                b[near])
+        k = int(np.argmin(d))
+        if d[k] > snap_m:
+            continue
+        L = float(np.hypot(*(b[near[k]] - a[near[k]])))
+        if s[k] < 1e-3 or s[k] > L - 1e-3:      # at a node of that way
+            m = int(und[near[k], 0] if s[k] < 1e-3 else und[near[k], 1])
+            if m != e and rep[m] == m:
+                rep[e] = m
+                target.add(m)
+                n_snapped += 1
+            continue
+        splits.setdefault(int(near[k]), []).append((float(s[k]), e))
+        n_snapped += 1
+    new_xy = [xy]
+    extra = 0
+    pair_split = {}                              # (u, v) of the original pair -> node chain
+    for k, lst in splits.items():
+        u, v = int(und[k, 0]), int(und[k, 1])
+        lst.sort()
+        chain = [u]
+        for s_k, e in lst:
+            p = a[k] + (b[k] - a[k]) * (s_k / max(np.hypot(*(b[k] - a[k])), 1e-9))
+            idx = n + extra
+            extra += 1
+            new_xy.append(p[None])
+            rep = np.append(rep, idx)
+            rep[e] = idx
+            chain.append(idx)
+        chain.append(v)
+        pair_split[(u, v)] = chain
+    for _ in range(8):                           # resolve chains of merges
+        nxt = rep[rep]
+        if np.array_equal(nxt, rep):
+            break
+        rep = nxt
+    out_u, out_v, out_w = [], [], []
+    for u, v, w in zip(su.tolist(), sv.tolist(), sw.tolist()):
+        key = (min(u, v), max(u, v))
+        chain = pair_split.get(key)
+        if chain is None:
+            out_u.append(u), out_v.append(v), out_w.append(w)
+            continue
+        c = chain if u == key[0] else chain[::-1]
+        for p, q in zip(c[:-1], c[1:]):
+            out_u.append(p), out_v.append(q), out_w.append(w)
+    su2 = rep[np.asarray(out_u, np.int64)]
+    sv2 = rep[np.asarray(out_v, np.int64)]
+    sw2 = np.asarray(out_w, np.int64)
+    ok = su2 != sv2
+    return np.concatenate(new_xy), su2[ok], sv2[ok], sw2[ok], n_snapped, extra
+
+
+def read_match_roads(path, *, snap_m=SNAP_M, highway=DRIVABLE, center=None) -> RoadGraph:
+    """The map as map matching needs it: every drivable way kept (not only the strongly
+    connected core: a car does drive on a one-way exit or a parking aisle that the extract cuts
+    off, and a road left out of the graph sends its fixes to another road), and the dead ends of
+    unjoined ways snapped to the road they touch within ``snap_m`` (``graph.snapped`` says how
+    many). The matcher breaks the chain where no transition is possible."""
+    return read_roads(path, highway=highway, strongly_connected=False, center=center,
+                      snap_m=snap_m)
+
+
+def read_roads(path, *, highway=DRIVABLE, strongly_connected=True, center=None,
+               snap_m=0.0) -> RoadGraph:
     """Build the drivable road graph of an OpenStreetMap file.
 
     Parameters
@@ -514,6 +659,10 @@ def read_roads(path, *, highway=DRIVABLE, strongly_connected=True, center=None) 
         be reached from every other (routes, and map matching's route distances, exist).
     center : (lat, lon) rad, optional
         Projection centre; default the centre of the nodes' bounding box.
+    snap_m : float
+        Snap tolerance, m: a dead end (a way end no other way shares) within this distance of
+        another way is joined to it (:func:`_snap_dead_ends`); 0 (default) joins nothing. The
+        graph's ``snapped`` attribute gives the number joined.
 
     Returns
     -------
@@ -557,19 +706,30 @@ def read_roads(path, *, highway=DRIVABLE, strongly_connected=True, center=None) 
             sh.extend([hw] * len(u)), ss.append(np.full(len(u), sp))
     su, sv, sw, sh, ss = (np.concatenate(su), np.concatenate(sv), np.concatenate(sw),
                           np.asarray(sh, dtype=object), np.concatenate(ss))
-    # a directed segment digitised twice (two ways over the same nodes) is kept once
-    _, keep = np.unique(su * (len(uid) + 1) + sv, return_index=True)
-    keep = np.sort(keep)
     from pyproj import Proj
 
     x, y = Proj(proj="aeqd", lat_0=np.degrees(lat0), lon_0=np.degrees(lon0), ellps="WGS84")(
         lon_deg, lat_deg)
-    g = RoadGraph(path.name, lat0, lon0, uid, np.column_stack([x, y]), su[keep], sv[keep],
+    xy = np.column_stack([x, y])
+    n_snapped = 0
+    if snap_m and snap_m > 0:
+        way_attr = {wid: (hw, (speed if np.isfinite(speed) else
+                               DEFAULT_SPEED.get(hw, 30 / 3.6))) for wid, hw, speed, _, _ in ways}
+        xy, su, sv, sw, n_snapped, n_new = _snap_dead_ends(xy, su, sv, sw, float(snap_m))
+        sh = np.asarray([way_attr[w][0] for w in sw.tolist()], dtype=object)
+        ss = np.asarray([way_attr[w][1] for w in sw.tolist()], float)
+        uid = np.concatenate([uid, -np.arange(1, n_new + 1, dtype=np.int64)])
+    # a directed segment digitised twice (two ways over the same nodes) is kept once
+    _, keep = np.unique(su * (len(uid) + 1) + sv, return_index=True)
+    keep = np.sort(keep)
+    g = RoadGraph(path.name, lat0, lon0, uid, xy, su[keep], sv[keep],
                   sw[keep], sh[keep], ss[keep])
     g = g.largest_strongly_connected() if strongly_connected else g.subgraph(
         np.unique(np.concatenate([g.seg_u, g.seg_v])))
     if g.n_segments == 0:
         raise InputError(path, "holds no connected drivable road network")
+    g.snapped = n_snapped
+    g.snap_m = float(snap_m or 0.0)
     return g
 
 

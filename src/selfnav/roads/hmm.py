@@ -57,13 +57,24 @@ class MatchResult:
     in_radius : (N,) bool
         The fix had at least one road within the search radius.
     restart : (N,) bool
-        The chain restarted at this fix (first fix, or no transition possible).
+        The chain restarted at this fix: the first fix, or a break (no transition possible
+        or plausible: a time gap, candidates the map does not connect, a route much longer
+        than the fixes' displacement). Each piece between breaks is matched on its own.
     seconds : float
         Processing time.
     way : (N,) int64
         OpenStreetMap way id of the matched segment.
     sigma : float
         The GNSS σ the track was matched with where its fixes give none, m.
+    matched : (N,) bool
+        The match is plausible: ``match_p`` at least :data:`MATCHED_P`, the fix within
+        :data:`MATCHED_GATE` σ of the road, and the fix not alone in its piece of chain.
+    match_p : (N,) float
+        Posterior probability (forward-backward over the same model, breaks included) of the
+        chosen road position: of the candidates whose road point lies within
+        :data:`SAME_ROAD_M` of it.
+    piece : (N,) int
+        Piece of chain (0, 1, ... at each break).
     """
 
     t: np.ndarray
@@ -78,12 +89,34 @@ class MatchResult:
     seconds: float = 0.0
     way: np.ndarray | None = None
     sigma: float = float("nan")
+    matched: np.ndarray | None = None
+    match_p: np.ndarray | None = None
+    piece: np.ndarray | None = None
+
+    @property
+    def breaks(self) -> int:
+        """Places where the chain was broken and restarted (the first fix not counted)."""
+        return int(np.sum(self.restart)) - 1 if len(self.t) else 0
+
+    def quality(self) -> dict:
+        """The track's quality summary: share of fixes flagged matched, breaks, median distance
+        from fix to road, mean ``match_p``."""
+        n = len(self.t)
+        ok = self.matched if self.matched is not None else self.in_radius
+        return {
+            "fixes": n,
+            "matched_share": float(np.mean(ok)) if n else 0.0,
+            "breaks": self.breaks,
+            "median_cross_m": float(np.median(self.moved)) if n else 0.0,
+            "mean_match_p": float(np.mean(self.match_p)) if n and self.match_p is not None
+            else None,
+        }
 
     def summary(self) -> dict:
         n = len(self.t)
         return {
-            "fixes": n,
-            "matched_share": float(np.mean(self.in_radius)) if n else 0.0,
+            **self.quality(),
+            "in_radius_share": float(np.mean(self.in_radius)) if n else 0.0,
             "mean_correction_m": float(np.mean(self.moved)) if n else 0.0,
             "max_correction_m": float(np.max(self.moved)) if n else 0.0,
             "restarts": int(np.sum(self.restart)),
@@ -139,115 +172,176 @@ def transition_route_distance(graph: RoadGraph, cand: Candidates, i, j, *, backt
 
 
 @numba.njit(cache=True)
-def _forward(a, b, off, seg, along, foot, em, d_gc, dt, lim, fastest, seg_u, seg_v, seg_len,
-             cache_arrays, beta, backtrack, max_gap, score, back, restart, scratch,
-             stamp0):  # pragma: no cover
-    """Viterbi forward recursion over the transitions ``a -> a+1 ... b-1 -> b`` (epoch ``a``
-    already scored), transitions computed on the fly: nothing of size (pairs) is stored.
-    ``beta`` and ``backtrack`` are per fix (tracks of different σ matched together).
+def _lae(a, b):  # pragma: no cover - numba
+    """log(exp(a) + exp(b))."""
+    if a == -np.inf:
+        return b
+    if b == -np.inf:
+        return a
+    if a > b:
+        return a + np.log1p(np.exp(b - a))
+    return b + np.log1p(np.exp(a - b))
+
+
+@numba.njit(cache=True)
+def _epoch_trans(t, off, seg, along, foot, d_gc, lim, fastest, seg_u, seg_v, seg_len,
+                 cache_arrays, beta, backtrack, cut, T, gap, scratch, stamp):  # pragma: no cover
+    """Log transition probabilities from the candidates of epoch ``t`` to those of ``t+1``
+    into ``T[:k_t, :k_t+1]`` (-inf: no transition), computed on the fly.
 
     The route distance of a transition (the scalar form of :func:`transition_route_distance`,
     forward gap cut at ``lim``): the end node of each candidate segment of epoch ``t`` is a
     source, the start nodes of epoch ``t+1`` the targets; each source's cached row (in distance
     order) is scanned once up to ``lim`` into a small source × target table. A route is never
     shorter than the straight line between its ends, so a pair whose bound
-    ``score_i - max(0, |foot_j - foot_i| - d_gc)/β`` cannot beat the best so far is skipped
-    (same result, less work). ``score`` is kept near 0 (the best of each epoch is subtracted);
-    an epoch that no transition reaches restarts the chain from its emissions."""
+    ``max(0, |foot_j - foot_i| - d_gc)/β`` passes ``cut`` is no transition without a look-up
+    (it would lose to a break by more than ``cut - |log p_break|``)."""
     row_of, row_start, row_len, pool_node, pool_dist = cache_arrays
     tgt_stamp, tgt_slot, src_stamp, src_slot = scratch   # node-sized, stamped, never reset
-    kmax = 1
-    for t in range(a, b + 1):
-        kmax = max(kmax, off[t + 1] - off[t])
-    gap = np.empty((kmax, kmax))
+    i0, i1 = off[t], off[t + 1]
+    j0, j1 = off[t + 1], off[t + 2]
+    b_t = beta[t]
+    bt = backtrack[t + 1]
+    n_tgt = 0
+    for j in range(j0, j1):
+        u = seg_u[seg[j]]
+        if tgt_stamp[u] != stamp:
+            tgt_stamp[u] = stamp
+            tgt_slot[u] = n_tgt
+            n_tgt += 1
+    n_src = 0
+    for i in range(i0, i1):
+        si, ai = seg[i], along[i]
+        rest_i = seg_len[si] - ai
+        v_i = seg_v[si]
+        if src_stamp[v_i] != stamp:      # scan this source's row once per epoch
+            src_stamp[v_i] = stamp
+            src_slot[v_i] = n_src
+            for m in range(n_tgt):
+                gap[n_src, m] = np.inf
+            r = row_of[v_i]
+            found = 0
+            if r >= 0:
+                for e in range(row_start[r], row_start[r] + row_len[r]):
+                    if pool_dist[e] > lim[t] or found == n_tgt:
+                        break
+                    w = pool_node[e]
+                    if tgt_stamp[w] == stamp:
+                        gap[n_src, tgt_slot[w]] = pool_dist[e]
+                        found += 1
+            n_src += 1
+        row = src_slot[v_i]
+        for j in range(j0, j1):
+            T[i - i0, j - j0] = -np.inf
+            excess = np.hypot(foot[j, 0] - foot[i, 0], foot[j, 1] - foot[i, 1]) - d_gc[t]
+            if excess > cut * b_t:
+                continue
+            sj, aj = seg[j], along[j]
+            if si == sj and aj >= ai:
+                d = aj - ai
+            else:
+                d = rest_i + gap[row, tgt_slot[seg_u[sj]]] + aj
+            if bt > 0:                   # backwards jitter on a slow or stopped car
+                if si == sj and aj < ai:
+                    db = ai - aj
+                else:
+                    rest = (seg_len[sj] - aj) + ai
+                    db = np.inf
+                    if rest <= bt:
+                        db = rest + route_gap(row_of, row_start, row_len, pool_node,
+                                              pool_dist, seg_v[sj], seg_u[si], bt - rest)
+                if db <= bt and db < d:
+                    d = db
+            if not d <= fastest[t]:
+                continue
+            v = -abs(d - d_gc[t]) / b_t
+            if v >= -cut:
+                T[i - i0, j - j0] = v
+
+
+@numba.njit(cache=True)
+def _forward(a, b, off, seg, along, foot, em, d_gc, forced, lim, fastest, seg_u, seg_v,
+             seg_len, cache_arrays, beta, backtrack, log_break, cut, score, back, alpha,
+             T, gap, scratch, stamp0):  # pragma: no cover - numba
+    """Viterbi (``score``, ``back``) and forward sums (``alpha``, log) over the transitions
+    ``a -> a+1 ... b-1 -> b`` (epoch ``a`` already scored). Besides the road transitions, every
+    candidate can be reached by a **break** from any candidate of the epoch before, with log
+    probability ``log_break`` (the chain restarts there: a map that lacks a connection, a jump
+    no road explains); ``forced[t]`` (a time gap, a new track) allows only the break.
+    ``back[j] = -1`` marks a break. Scores and sums are kept near 0 (the best of each epoch is
+    subtracted)."""
     for t in range(a, b):
         i0, i1 = off[t], off[t + 1]
         j0, j1 = off[t + 1], off[t + 2]
-        stamp = stamp0 + t
-        b_t = beta[t]
-        bt = backtrack[t + 1]
+        if not forced[t]:
+            _epoch_trans(t, off, seg, along, foot, d_gc, lim, fastest, seg_u, seg_v, seg_len,
+                         cache_arrays, beta, backtrack, cut, T, gap, scratch, stamp0 + t)
+        la = -np.inf
+        for i in range(i0, i1):
+            la = _lae(la, alpha[i])
+        lb = 0.0 if forced[t] else log_break
+        best_s = -np.inf
+        best_a = -np.inf
         for j in range(j0, j1):
-            score[j] = -np.inf
-            back[j] = -1
-        if dt[t] <= max_gap:
-            n_tgt = 0
-            for j in range(j0, j1):
-                u = seg_u[seg[j]]
-                if tgt_stamp[u] != stamp:
-                    tgt_stamp[u] = stamp
-                    tgt_slot[u] = n_tgt
-                    n_tgt += 1
-            n_src = 0
-            for i in range(i0, i1):
-                s_i = score[i]
-                if s_i == -np.inf:
-                    continue
-                si, ai = seg[i], along[i]
-                rest_i = seg_len[si] - ai
-                v_i = seg_v[si]
-                if src_stamp[v_i] != stamp:      # scan this source's row once per epoch
-                    src_stamp[v_i] = stamp
-                    src_slot[v_i] = n_src
-                    for m in range(n_tgt):
-                        gap[n_src, m] = np.inf
-                    r = row_of[v_i]
-                    found = 0
-                    for e in range(row_start[r], row_start[r] + row_len[r]):
-                        if pool_dist[e] > lim[t] or found == n_tgt:
-                            break
-                        w = pool_node[e]
-                        if tgt_stamp[w] == stamp:
-                            gap[n_src, tgt_slot[w]] = pool_dist[e]
-                            found += 1
-                    n_src += 1
-                row = src_slot[v_i]
-                for j in range(j0, j1):
-                    excess = np.hypot(foot[j, 0] - foot[i, 0], foot[j, 1] - foot[i, 1]) - d_gc[t]
-                    if excess > 0 and s_i - excess / b_t <= score[j]:
+            sb = lb                          # break from the best (score max is 0)
+            bj = -1
+            acc = la + lb
+            if not forced[t]:
+                for i in range(i0, i1):
+                    v = T[i - i0, j - j0]
+                    if v == -np.inf:
                         continue
-                    sj, aj = seg[j], along[j]
-                    if si == sj and aj >= ai:
-                        d = aj - ai
-                    else:
-                        d = rest_i + gap[row, tgt_slot[seg_u[sj]]] + aj
-                    if bt > 0:                   # backwards jitter on a slow or stopped car
-                        if si == sj and aj < ai:
-                            db = ai - aj
-                        else:
-                            rest = (seg_len[sj] - aj) + ai
-                            db = np.inf
-                            if rest <= bt:
-                                db = rest + route_gap(row_of, row_start, row_len, pool_node,
-                                                      pool_dist, seg_v[sj], seg_u[si], bt - rest)
-                        if db <= bt and db < d:
-                            d = db
-                    if not d <= fastest[t]:
-                        continue
-                    v = s_i - abs(d - d_gc[t]) / b_t
-                    if v > score[j]:
-                        score[j] = v
-                        back[j] = i
-        best = -np.inf
-        for j in range(j0, j1):
-            if back[j] >= 0:
-                score[j] += em[j]
-            if score[j] > best:
-                best = score[j]
-        if best == -np.inf:          # no transition possible: restart the chain here
-            restart[t + 1] = True
-            for j in range(j0, j1):
-                score[j] = em[j]
-                back[j] = -1
-                if score[j] > best:
-                    best = score[j]
+                    s = score[i] + v
+                    if s > sb:
+                        sb = s
+                        bj = i
+                    acc = _lae(acc, alpha[i] + v)
+            score[j] = sb + em[j]
+            back[j] = bj
+            alpha[j] = acc + em[j]
+            best_s = max(best_s, score[j])
+            best_a = max(best_a, alpha[j])
         for j in range(j0, j1):      # keep scores near 0 (no drift over long tracks)
-            score[j] -= best
+            score[j] -= best_s
+            alpha[j] -= best_a
+
+
+@numba.njit(cache=True)
+def _backward(a, b, off, seg, along, foot, em, d_gc, forced, lim, fastest, seg_u, seg_v,
+              seg_len, cache_arrays, beta, backtrack, log_break, cut, bet, T, gap, scratch,
+              stamp0):  # pragma: no cover - numba
+    """Backward sums (``bet``, log) over the transitions ``b-1 -> b ... a -> a+1`` (epoch ``b``
+    already done), the same model as :func:`_forward`."""
+    for t in range(b - 1, a - 1, -1):
+        i0, i1 = off[t], off[t + 1]
+        j0, j1 = off[t + 1], off[t + 2]
+        lw = -np.inf
+        for j in range(j0, j1):
+            lw = _lae(lw, em[j] + bet[j])
+        if forced[t]:
+            for i in range(i0, i1):
+                bet[i] = 0.0
+            continue
+        _epoch_trans(t, off, seg, along, foot, d_gc, lim, fastest, seg_u, seg_v, seg_len,
+                     cache_arrays, beta, backtrack, cut, T, gap, scratch, stamp0 + t)
+        best = -np.inf
+        for i in range(i0, i1):
+            acc = log_break + lw
+            for j in range(j0, j1):
+                v = T[i - i0, j - j0]
+                if v == -np.inf:
+                    continue
+                acc = _lae(acc, v + em[j] + bet[j])
+            bet[i] = acc
+            best = max(best, acc)
+        for i in range(i0, i1):
+            bet[i] -= best
 
 
 @numba.njit(cache=True)
 def _backtrack(off, score, back):  # pragma: no cover - numba
     """Best path: from the best candidate of the last epoch (and of the epoch before each
-    restart) along the back-pointers."""
+    break) along the back-pointers."""
     n = len(off) - 1
     path = np.empty(n, np.int64)
     t = n - 1
@@ -263,6 +357,23 @@ def _backtrack(off, score, back):  # pragma: no cover - numba
             t -= 1
         t -= 1
     return path
+
+
+#: Log probability of a break (the chain restarts: a connection the map lacks, a jump no road
+#: explains) at each transition.
+LOG_BREAK = -12.0
+#: Share of fixes from the wide (multipath) part of the emission, and its σ (m; at least 3σ).
+OUTLIER_P = 0.02
+OUTLIER_SIGMA_M = 100.0
+#: A fix is flagged ``matched`` when the posterior of its road is at least MATCHED_P, its
+#: distance to the road at most MATCHED_GATE σ, and it is not alone in its piece of chain.
+MATCHED_P = 0.5
+MATCHED_GATE = 3.0
+#: ... and never farther than this from its road, m (a track whose fixes lie 100 m from every
+#: road gets a σ estimate of 50 m: its match is not plausible, whatever the σ says).
+MATCHED_MAX_M = 50.0
+#: Candidates whose road points lie this close (m) count as the same road for ``match_p``.
+SAME_ROAD_M = 5.0
 
 
 class HmmMatcher:
@@ -309,8 +420,16 @@ class HmmMatcher:
 
     def __init__(self, graph: RoadGraph, *, sigma=10.0, beta=None, radius=None, k=16,
                  backtrack=None, max_speed=60.0, max_gap=120.0, window=4096,
-                 cache: RouteCache | None = None):
+                 cache: RouteCache | None = None, log_break=LOG_BREAK, outlier_p=OUTLIER_P,
+                 outlier_sigma=OUTLIER_SIGMA_M, matched_p=MATCHED_P,
+                 matched_gate=MATCHED_GATE):
         self.graph = graph
+        self.log_break = float(log_break)
+        self.cut = abs(self.log_break) + 10.0
+        self.outlier_p = float(outlier_p)
+        self.outlier_sigma = float(outlier_sigma)
+        self.matched_p = float(matched_p)
+        self.matched_gate = float(matched_gate)
         self._given = {"beta": beta, "radius": radius, "backtrack": backtrack}
         self._set_sigma(sigma)
         self.k = int(k)
@@ -421,45 +540,90 @@ class HmmMatcher:
         backtrack = np.repeat([m.backtrack for m in per], sizes)
         off, seg, along, dist, foot = self._candidates(xy, radius)
         query = np.repeat(np.arange(n), np.diff(off))
-        em = -0.5 * (dist / sig[query]) ** 2
+        em = self.emission(dist, sig[query])
         d_gc = np.hypot(*(xy[1:] - xy[:-1]).T)
         dt = np.diff(ts)
         dt[bounds[1:-1] - 1] = np.inf          # a new track: no transition, the chain restarts
+        forced = ~(dt <= self.max_gap)          # a time gap (or a new track): only a break
         r_ep = np.maximum(radius[1:], radius[:-1]) if n > 1 else np.zeros(0)
         fastest = self.max_speed * np.minimum(dt, self.max_gap) + 2 * r_ep
-        lim = np.minimum(d_gc + 2 * r_ep + 20 * beta[:-1], fastest)
+        cut = self.cut
+        lim = np.minimum(d_gc + cut * beta[:-1], fastest)
         score = np.empty(len(seg))
+        alpha = np.empty(len(seg))
+        bet = np.zeros(len(seg))
         back = np.full(len(seg), -1, np.int64)
-        restart = np.zeros(n, bool)
-        restart[0] = True
-        score[off[0]:off[1]] = em[off[0]:off[1]]
+        e0 = slice(off[0], off[1])
+        score[e0] = em[e0] - em[e0].max()
+        alpha[e0] = score[e0]
         seg_u, seg_v, seg_len = self._g
-        for a in range(0, n - 1, self.window):
-            b = min(a + self.window, n - 1)
-            # sources: candidates of epochs a .. b-1 (forward) and a+1 .. b (backwards)
-            self.cache.ensure(
-                np.concatenate([seg_v[seg[off[a]:off[b]]], seg_v[seg[off[a + 1]:off[b + 1]]]]),
-                np.concatenate([np.repeat(lim[a:b], np.diff(off[a:b + 1])),
-                                np.repeat(backtrack[a + 1:b + 1], np.diff(off[a + 1:b + 2]))]))
-            _forward(a, b, off, seg, along, foot, em, d_gc, dt, lim, fastest, seg_u, seg_v,
-                     seg_len, self.cache.arrays, beta, backtrack, self.max_gap, score, back,
-                     restart, self._scratch, self._stamp[0])
-        self._stamp[0] += n + 1
+        kmax = int(np.diff(off).max()) if n else 1
+        T = np.empty((kmax, kmax))
+        gap = np.empty((kmax, kmax))
+        windows = [(a, min(a + self.window, n - 1)) for a in range(0, n - 1, self.window)]
+        stamp = self._stamp[0]
+        for a, b in windows:
+            self._ensure_rows(a, b, off, seg, lim, backtrack, forced)
+            _forward(a, b, off, seg, along, foot, em, d_gc, forced, lim, fastest, seg_u, seg_v,
+                     seg_len, self.cache.arrays, beta, backtrack, self.log_break, cut, score,
+                     back, alpha, T, gap, self._scratch, stamp)
+        for a, b in windows[::-1]:
+            self._ensure_rows(a, b, off, seg, lim, backtrack, forced)
+            _backward(a, b, off, seg, along, foot, em, d_gc, forced, lim, fastest, seg_u,
+                      seg_v, seg_len, self.cache.arrays, beta, backtrack, self.log_break, cut,
+                      bet, T, gap, self._scratch, stamp + n + 1)
+        self._stamp[0] += 2 * (n + 1)
         path = _backtrack(off, score, back)
+        restart = back[path] < 0
+        # posterior of each candidate, and of the chosen road position (candidates whose road
+        # point lies within SAME_ROAD_M of the chosen one: both directions of a two-way road)
+        lp = alpha + bet
+        mx = np.maximum.reduceat(lp, off[:-1]) if n else lp
+        post = np.exp(lp - mx[query])
+        post /= np.add.reduceat(post, off[:-1])[query]
+        near = np.hypot(*(foot - foot[path][query]).T) <= SAME_ROAD_M
+        match_p = np.bincount(query, weights=post * near, minlength=n)
         mseg, malong = seg[path], along[path]
         foot = foot[path]
         lat, lon = g.to_geodetic(foot[:, 0], foot[:, 1])
         in_radius = np.bincount(query[dist <= radius[query]], minlength=n) > 0
         way = g.seg_way[mseg]
         moved = dist[path]
+        piece = np.cumsum(restart) - 1
         seconds = time.perf_counter() - t0
         out = []
         for m, a, b in zip(per, bounds[:-1], bounds[1:]):
             sl = slice(a, b)
+            pc = piece[sl] - piece[a]
+            size = np.bincount(pc)[pc]
+            gate = np.minimum(self.matched_gate * sig[sl], MATCHED_MAX_M)
+            matched = ((moved[sl] <= gate)
+                       & (match_p[sl] >= self.matched_p)
+                       & ((size >= 2) | (b - a < 2)))
             out.append(MatchResult(ts[sl], foot[sl], lat[sl], lon[sl], mseg[sl], malong[sl],
                                    moved[sl], in_radius[sl], restart[sl],
-                                   seconds * (b - a) / max(n, 1), way[sl], m.sigma))
+                                   seconds * (b - a) / max(n, 1), way[sl], m.sigma,
+                                   matched, np.clip(match_p[sl], 0.0, 1.0), pc))
         return out
+
+    def _ensure_rows(self, a, b, off, seg, lim, backtrack, forced):
+        """Route rows for the transitions of epochs ``a .. b-1``: sources the candidates of
+        epochs a .. b-1 (forward) and a+1 .. b (backwards jitter)."""
+        seg_v = self._g[1]
+        lim_w = np.where(forced[a:b], 0.0, lim[a:b])
+        self.cache.ensure(
+            np.concatenate([seg_v[seg[off[a]:off[b]]], seg_v[seg[off[a + 1]:off[b + 1]]]]),
+            np.concatenate([np.repeat(lim_w, np.diff(off[a:b + 1])),
+                            np.repeat(backtrack[a + 1:b + 1], np.diff(off[a + 1:b + 2]))]))
+
+    def emission(self, dist, sigma):
+        """Log emission of candidates at ``dist`` m from their fix of σ ``sigma`` m: Gaussian,
+        with a share ``outlier_p`` of fixes from a wide Gaussian of σ ``outlier_sigma`` (multipath:
+        a fix tens of metres off costs a bounded amount, so one bad fix does not pull the match
+        onto whatever road lies under it)."""
+        so = np.maximum(self.outlier_sigma, 3 * sigma)
+        return np.logaddexp(np.log1p(-self.outlier_p) - 0.5 * (dist / sigma) ** 2,
+                            np.log(self.outlier_p) + np.log(sigma / so) - 0.5 * (dist / so) ** 2)
 
     def match_geodetic(self, t, lat, lon, sigma=None) -> MatchResult:
         """Match fixes given as WGS-84 latitude and longitude (rad)."""
