@@ -63,8 +63,7 @@ def test_navigate_equals_the_command_line(sim, tmp_path, capsys):
 def test_match_and_evaluate_equal_the_command_line(sim, tmp_path, capsys):
     pbf = next(sim.glob("*.osm.pbf"))
     gnss = selfnav.read_gnss(sim / "gnss.csv")
-    roads = selfnav.read_roads(pbf)
-    m = selfnav.match(gnss, roads)
+    m = selfnav.match(gnss, pbf)          # a path: read as the command reads it (every way)
     out = tmp_path / "m.csv"
     code, _, err = run(["match", "--gnss", sim / "gnss.csv", "--map", pbf, "--out", out], capsys)
     assert code == 0, err

@@ -33,7 +33,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from selfnav.roads.graph import Candidates, RoadGraph
+from selfnav.roads.graph import Candidates, RoadGraph, project_points_to_segments
 from selfnav.roads.routes import RouteCache, route_gap
 
 
@@ -70,9 +70,9 @@ class MatchResult:
         The match is plausible: ``match_p`` at least :data:`MATCHED_P`, the fix within
         :data:`MATCHED_GATE` σ of the road, and the fix not alone in its piece of chain.
     match_p : (N,) float
-        Posterior probability (forward-backward over the same model, breaks included) of the
-        chosen road position: of the candidates whose road point lies within
-        :data:`SAME_ROAD_M` of it.
+        Posterior probability (forward-backward over the same model, breaks included) that the
+        chosen road position is on the driven road: the posterior mass of the candidates whose
+        road segment passes within :data:`SAME_ROAD_M` of it.
     piece : (N,) int
         Piece of chain (0, 1, ... at each break).
     """
@@ -172,22 +172,13 @@ def transition_route_distance(graph: RoadGraph, cand: Candidates, i, j, *, backt
 
 
 @numba.njit(cache=True)
-def _lae(a, b):  # pragma: no cover - numba
-    """log(exp(a) + exp(b))."""
-    if a == -np.inf:
-        return b
-    if b == -np.inf:
-        return a
-    if a > b:
-        return a + np.log1p(np.exp(b - a))
-    return b + np.log1p(np.exp(a - b))
-
-
-@numba.njit(cache=True)
-def _epoch_trans(t, off, seg, along, foot, d_gc, lim, fastest, seg_u, seg_v, seg_len,
-                 cache_arrays, beta, backtrack, cut, T, gap, scratch, stamp):  # pragma: no cover
-    """Log transition probabilities from the candidates of epoch ``t`` to those of ``t+1``
-    into ``T[:k_t, :k_t+1]`` (-inf: no transition), computed on the fly.
+def _epoch_step(t, off, seg, along, foot, pos, lim, fastest, seg_u, seg_v, seg_len,
+                cache_arrays, beta, backtrack, cut, gap, scratch, stamp, score, back, alpha,
+                log_break, pb, inv_temp, pw, pi, pj, k):  # pragma: no cover - numba
+    """One step of :func:`_forward`, epoch ``t`` to ``t+1``: the transitions computed on the
+    fly, the Viterbi scores and back-pointers and the forward sums of epoch ``t+1`` (before
+    its emissions) updated, the transition weights stored from ``pw[k]`` on; returns the new
+    ``k``.
 
     The route distance of a transition (the scalar form of :func:`transition_route_distance`,
     forward gap cut at ``lim``): the end node of each candidate segment of epoch ``t`` is a
@@ -195,7 +186,11 @@ def _epoch_trans(t, off, seg, along, foot, d_gc, lim, fastest, seg_u, seg_v, seg
     order) is scanned once up to ``lim`` into a small source × target table. A route is never
     shorter than the straight line between its ends, so a pair whose bound
     ``max(0, |foot_j - foot_i| - d_gc)/β`` passes ``cut`` is no transition without a look-up
-    (it would lose to a break by more than ``cut - |log p_break|``)."""
+    (it would lose to a break by more than ``cut - |log p_break|``); so is a pair whose bound
+    can beat neither the best Viterbi score of ``j`` so far nor add to its sum more than
+    1e-4 of the break's share. ``d_gc`` is the distance
+    between the positions ``pos`` of the fix as each candidate sees it: the fix itself, or for
+    a neighbour candidate (:meth:`HmmMatcher._candidates`) where its neighbours put it."""
     row_of, row_start, row_len, pool_node, pool_dist = cache_arrays
     tgt_stamp, tgt_slot, src_stamp, src_slot = scratch   # node-sized, stamped, never reset
     i0, i1 = off[t], off[t + 1]
@@ -209,8 +204,18 @@ def _epoch_trans(t, off, seg, along, foot, d_gc, lim, fastest, seg_u, seg_v, seg
             tgt_stamp[u] = stamp
             tgt_slot[u] = n_tgt
             n_tgt += 1
+    for j in range(j0, j1):
+        score[j] = log_break                 # break from the best (score max is 0)
+        back[j] = -1
+        alpha[j] = pb                        # break: from all of epoch t (alpha sums to 1)
+    la_min = np.log(1e-2 * pb)
     n_src = 0
     for i in range(i0, i1):
+        s_i = score[i]
+        a_i = alpha[i]
+        la_i = np.log(a_i) if a_i > 0 else -np.inf
+        if s_i < log_break and la_i < la_min:   # loses to a break, adds nothing
+            continue
         si, ai = seg[i], along[i]
         rest_i = seg_len[si] - ai
         v_i = seg_v[si]
@@ -232,10 +237,14 @@ def _epoch_trans(t, off, seg, along, foot, d_gc, lim, fastest, seg_u, seg_v, seg
             n_src += 1
         row = src_slot[v_i]
         for j in range(j0, j1):
-            T[i - i0, j - j0] = -np.inf
-            excess = np.hypot(foot[j, 0] - foot[i, 0], foot[j, 1] - foot[i, 1]) - d_gc[t]
+            dg = np.hypot(pos[j, 0] - pos[i, 0], pos[j, 1] - pos[i, 1])
+            excess = np.hypot(foot[j, 0] - foot[i, 0], foot[j, 1] - foot[i, 1]) - dg
             if excess > cut * b_t:
                 continue
+            if excess > 0:
+                bound = -excess / b_t
+                if s_i + bound <= score[j] and la_i + bound * inv_temp < la_min:
+                    continue
             sj, aj = seg[j], along[j]
             if si == sj and aj >= ai:
                 d = aj - ai
@@ -247,95 +256,114 @@ def _epoch_trans(t, off, seg, along, foot, d_gc, lim, fastest, seg_u, seg_v, seg
                 else:
                     rest = (seg_len[sj] - aj) + ai
                     db = np.inf
-                    if rest <= bt:
+                    if rest <= bt and rest < d:
                         db = rest + route_gap(row_of, row_start, row_len, pool_node,
                                               pool_dist, seg_v[sj], seg_u[si], bt - rest)
                 if db <= bt and db < d:
                     d = db
             if not d <= fastest[t]:
                 continue
-            v = -abs(d - d_gc[t]) / b_t
-            if v >= -cut:
-                T[i - i0, j - j0] = v
+            v = -abs(d - dg) / b_t
+            if v < -cut:
+                continue
+            if s_i + v > score[j]:
+                score[j] = s_i + v
+                back[j] = i
+            wv = np.exp(v * inv_temp)
+            alpha[j] += a_i * wv
+            pw[k] = wv
+            pi[k] = i - i0
+            pj[k] = j - j0
+            k += 1
+    return k
 
 
 @numba.njit(cache=True)
-def _forward(a, b, off, seg, along, foot, em, d_gc, forced, lim, fastest, seg_u, seg_v,
+def _forward(a, b, off, seg, along, foot, em, pos, forced, lim, fastest, seg_u, seg_v,
              seg_len, cache_arrays, beta, backtrack, log_break, cut, score, back, alpha,
-             T, gap, scratch, stamp0):  # pragma: no cover - numba
-    """Viterbi (``score``, ``back``) and forward sums (``alpha``, log) over the transitions
-    ``a -> a+1 ... b-1 -> b`` (epoch ``a`` already scored). Besides the road transitions, every
-    candidate can be reached by a **break** from any candidate of the epoch before, with log
-    probability ``log_break`` (the chain restarts there: a map that lacks a connection, a jump
-    no road explains); ``forced[t]`` (a time gap, a new track) allows only the break.
-    ``back[j] = -1`` marks a break. Scores and sums are kept near 0 (the best of each epoch is
-    subtracted)."""
+             gap, scratch, stamp0, inv_temp, pw, pi, pj, pstart):  # pragma: no cover
+    """Viterbi (``score``, ``back``) and forward sums (``alpha``, linear, each epoch summing
+    to 1) over the transitions ``a -> a+1 ... b-1 -> b`` (epoch ``a`` already done). Besides
+    the road transitions, every candidate can be reached by a **break** from any candidate of
+    the epoch before, with log probability ``log_break`` (the chain restarts there: a map that
+    lacks a connection, a jump no road explains); ``forced[t]`` (a time gap, a new track)
+    allows only the break. ``back[j] = -1`` marks a break. Scores are kept near 0 (the best of
+    each epoch is subtracted).
+
+    The sums use every log probability times ``inv_temp``; the weights ``exp(inv_temp · log
+    p)`` of the road transitions are stored (``pw`` with local indices ``pi``, ``pj``; epoch
+    ``t``'s from ``pstart[t - a]``) for :func:`_backward`, which so needs no route look-up.
+    Returns the number of weights stored."""
+    pb = np.exp(log_break * inv_temp)
+    k = 0
     for t in range(a, b):
         i0, i1 = off[t], off[t + 1]
         j0, j1 = off[t + 1], off[t + 2]
-        if not forced[t]:
-            _epoch_trans(t, off, seg, along, foot, d_gc, lim, fastest, seg_u, seg_v, seg_len,
-                         cache_arrays, beta, backtrack, cut, T, gap, scratch, stamp0 + t)
-        la = -np.inf
-        for i in range(i0, i1):
-            la = _lae(la, alpha[i])
-        lb = 0.0 if forced[t] else log_break
-        best_s = -np.inf
-        best_a = -np.inf
+        pstart[t - a] = k
+        em_max = -np.inf
         for j in range(j0, j1):
-            sb = lb                          # break from the best (score max is 0)
-            bj = -1
-            acc = la + lb
-            if not forced[t]:
-                for i in range(i0, i1):
-                    v = T[i - i0, j - j0]
-                    if v == -np.inf:
-                        continue
-                    s = score[i] + v
-                    if s > sb:
-                        sb = s
-                        bj = i
-                    acc = _lae(acc, alpha[i] + v)
-            score[j] = sb + em[j]
-            back[j] = bj
-            alpha[j] = acc + em[j]
+            em_max = max(em_max, em[j])
+        if forced[t]:
+            best_s = -np.inf
+            tot = 0.0
+            for j in range(j0, j1):
+                score[j] = em[j]
+                back[j] = -1
+                alpha[j] = np.exp((em[j] - em_max) * inv_temp)
+                tot += alpha[j]
+                best_s = max(best_s, score[j])
+            for j in range(j0, j1):
+                score[j] -= best_s
+                alpha[j] /= tot
+            continue
+        k = _epoch_step(t, off, seg, along, foot, pos, lim, fastest, seg_u, seg_v, seg_len,
+                        cache_arrays, beta, backtrack, cut, gap, scratch, stamp0 + t, score,
+                        back, alpha, log_break, pb, inv_temp, pw, pi, pj, k)
+        best_s = -np.inf
+        tot = 0.0
+        for j in range(j0, j1):
+            score[j] += em[j]
             best_s = max(best_s, score[j])
-            best_a = max(best_a, alpha[j])
+            alpha[j] *= np.exp((em[j] - em_max) * inv_temp)
+            tot += alpha[j]
         for j in range(j0, j1):      # keep scores near 0 (no drift over long tracks)
             score[j] -= best_s
-            alpha[j] -= best_a
+            alpha[j] /= tot
+    pstart[b - a] = k
+    return k
 
 
 @numba.njit(cache=True)
-def _backward(a, b, off, seg, along, foot, em, d_gc, forced, lim, fastest, seg_u, seg_v,
-              seg_len, cache_arrays, beta, backtrack, log_break, cut, bet, T, gap, scratch,
-              stamp0):  # pragma: no cover - numba
-    """Backward sums (``bet``, log) over the transitions ``b-1 -> b ... a -> a+1`` (epoch ``b``
-    already done), the same model as :func:`_forward`."""
+def _backward(a, b, off, em, forced, log_break, bet, inv_temp, pw, pi, pj,
+              pstart):  # pragma: no cover - numba
+    """Backward sums (``bet``, linear, each epoch's maximum 1) over the transitions
+    ``b-1 -> b ... a -> a+1`` (epoch ``b`` already done), from the weights :func:`_forward`
+    stored: the same model."""
+    pb = np.exp(log_break * inv_temp)
+    ww = np.empty(max(1, np.max(off[a + 1:b + 2] - off[a:b + 1])))
     for t in range(b - 1, a - 1, -1):
         i0, i1 = off[t], off[t + 1]
         j0, j1 = off[t + 1], off[t + 2]
-        lw = -np.inf
+        em_max = -np.inf
         for j in range(j0, j1):
-            lw = _lae(lw, em[j] + bet[j])
+            em_max = max(em_max, em[j])
+        tot = 0.0
+        for j in range(j0, j1):
+            ww[j - j0] = np.exp((em[j] - em_max) * inv_temp) * bet[j]
+            tot += ww[j - j0]
         if forced[t]:
             for i in range(i0, i1):
-                bet[i] = 0.0
+                bet[i] = 1.0
             continue
-        _epoch_trans(t, off, seg, along, foot, d_gc, lim, fastest, seg_u, seg_v, seg_len,
-                     cache_arrays, beta, backtrack, cut, T, gap, scratch, stamp0 + t)
-        best = -np.inf
         for i in range(i0, i1):
-            acc = log_break + lw
-            for j in range(j0, j1):
-                v = T[i - i0, j - j0]
-                if v == -np.inf:
-                    continue
-                acc = _lae(acc, v + em[j] + bet[j])
-            bet[i] = acc
-            best = max(best, acc)
+            bet[i] = pb * tot
+        for k in range(pstart[t - a], pstart[t - a + 1]):
+            bet[i0 + pi[k]] += pw[k] * ww[pj[k]]
+        mx = 0.0
         for i in range(i0, i1):
-            bet[i] -= best
+            mx = max(mx, bet[i])
+        for i in range(i0, i1):
+            bet[i] = bet[i] / mx if mx > 0 else 1.0
 
 
 @numba.njit(cache=True)
@@ -359,6 +387,8 @@ def _backtrack(off, score, back):  # pragma: no cover - numba
     return path
 
 
+#: Lowest GNSS σ a track's fixes are estimated to have, m (:meth:`HmmMatcher.estimate_sigmas`).
+SIGMA_MIN_M = 3.0
 #: Log probability of a break (the chain restarts: a connection the map lacks, a jump no road
 #: explains) at each transition.
 LOG_BREAK = -12.0
@@ -367,13 +397,59 @@ OUTLIER_P = 0.02
 OUTLIER_SIGMA_M = 100.0
 #: A fix is flagged ``matched`` when the posterior of its road is at least MATCHED_P, its
 #: distance to the road at most MATCHED_GATE σ, and it is not alone in its piece of chain.
-MATCHED_P = 0.5
+MATCHED_P = 0.7
 MATCHED_GATE = 3.0
 #: ... and never farther than this from its road, m (a track whose fixes lie 100 m from every
 #: road gets a σ estimate of 50 m: its match is not plausible, whatever the σ says).
 MATCHED_MAX_M = 50.0
+#: Roads near the neighbours' interpolation a far-off fix gets as candidates besides its own.
+K_NEIGHBOUR = 4
+#: The posterior (``match_p``) is computed with every log probability divided by this: the model
+#: treats fixes as independent, real errors are correlated over tens of seconds, so the plain
+#: posterior is overconfident. The Viterbi path does not depend on it.
+TEMPERATURE = 1.0
+#: A fix within STATIONARY_K σ of the one before continues a stationary run, whose fixes' emissions
+#: are weighted N ** -STATIONARY_A (:func:`stationary_weight`).
+STATIONARY_K = 2.0
+STATIONARY_A = 1.0
 #: Candidates whose road points lie this close (m) count as the same road for ``match_p``.
 SAME_ROAD_M = 5.0
+
+
+def neighbour_points(xy, bounds):
+    """Where its neighbours put each fix: the midpoint of the fixes before and after it (the
+    one neighbour at a track's ends; the fix itself in a track of one), within each track
+    (``bounds``: track starts and the total, as from ``np.cumsum``)."""
+    n = len(xy)
+    q = xy.copy()
+    if n < 2:
+        return q
+    first = np.zeros(n, bool)
+    last = np.zeros(n, bool)
+    first[np.asarray(bounds[:-1], np.int64)[np.asarray(bounds[:-1]) < n]] = True
+    last[np.asarray(bounds[1:], np.int64) - 1] = True
+    prev = np.vstack([xy[:1], xy[:-1]])
+    nxt = np.vstack([xy[1:], xy[-1:]])
+    prev = np.where(first[:, None], nxt, prev)
+    nxt = np.where(last[:, None], prev, nxt)
+    alone = first & last
+    q = np.where(alone[:, None], xy, 0.5 * (prev + nxt))
+    return q
+
+
+def stationary_weight(xy, bounds, step_m, power=1.0):
+    """Weight of each fix's emission: ``N ** -power`` for a fix in a stationary run of N fixes
+    (consecutive fixes of a track each within ``step_m`` m of the one before), 1 elsewhere. A
+    standing car's fixes repeat the same (correlated) error: counted as N independent looks
+    they would outweigh the road the car drove in on."""
+    n = len(xy)
+    if n < 2:
+        return np.ones(n)
+    step = np.hypot(*(xy[1:] - xy[:-1]).T) <= np.minimum(step_m[1:], step_m[:-1])
+    step[np.asarray(bounds[1:-1], np.int64) - 1] = False     # never across tracks
+    run = np.concatenate([[0], np.cumsum(~step)])            # run id of each fix
+    size = np.bincount(run)[run]
+    return size.astype(float) ** -power
 
 
 class HmmMatcher:
@@ -422,10 +498,14 @@ class HmmMatcher:
                  backtrack=None, max_speed=60.0, max_gap=120.0, window=4096,
                  cache: RouteCache | None = None, log_break=LOG_BREAK, outlier_p=OUTLIER_P,
                  outlier_sigma=OUTLIER_SIGMA_M, matched_p=MATCHED_P,
-                 matched_gate=MATCHED_GATE):
+                 matched_gate=MATCHED_GATE, temperature=TEMPERATURE,
+                 stationary_k=STATIONARY_K, stationary_a=STATIONARY_A):
         self.graph = graph
+        self.temperature = float(temperature)
+        self.stationary_k = float(stationary_k)
+        self.stationary_a = float(stationary_a)
         self.log_break = float(log_break)
-        self.cut = abs(self.log_break) + 10.0
+        self.cut = abs(self.log_break) + 6.0
         self.outlier_p = float(outlier_p)
         self.outlier_sigma = float(outlier_sigma)
         self.matched_p = float(matched_p)
@@ -479,25 +559,51 @@ class HmmMatcher:
         out = []
         for a, b in zip(np.cumsum([0] + sizes[:-1]), np.cumsum(sizes)):
             s = 1.4826 * float(np.nanmedian(d[a:b])) if b > a else self.sigma
-            out.append(float(np.clip(np.round(2 * s) / 2, 5.0, 50.0)))
+            out.append(float(np.clip(np.round(2 * s) / 2, SIGMA_MIN_M, 50.0)))
         return out
 
-    def _candidates(self, xy, radius):
-        """Candidates of all fixes, searched window by window: ``(off, seg, along, dist, foot)``."""
+    def _candidates(self, xy, radius, q=None):
+        """Candidates of all fixes, searched window by window: ``(off, seg, along, dist, foot,
+        pos)`` (``pos``: the position of the fix the candidate stands for).
+
+        With ``q`` (one point per fix: where its neighbours put it, :func:`neighbour_points`),
+        a fix that lies more than its search radius from its ``q`` also gets the roads near
+        ``q`` (at most :data:`K_NEIGHBOUR`, foot points of ``q``, distances from the fix): a
+        multipath outlier then keeps the road its neighbours are on as a candidate, instead of
+        only the roads under the outlier."""
         n = len(xy)
-        offs, segs, alongs, dists, feet = [np.zeros(1, np.int64)], [], [], [], []
+        offs, segs, alongs, dists, feet, poss = [np.zeros(1, np.int64)], [], [], [], [], []
         total = 0
         for a in range(0, n, self.window):
-            c = self.graph.candidates(xy[a:a + self.window], radius[a:a + self.window],
-                                      k=self.k, min_candidates=1, per_way=True)
-            offs.append(c.offsets(len(xy[a:a + self.window]))[1:] + total)
-            total += len(c)
-            segs.append(c.seg)
-            alongs.append(c.along)
-            dists.append(c.dist)
-            feet.append(c.foot)
+            sl = slice(a, a + self.window)
+            c = self.graph.candidates(xy[sl], radius[sl], k=self.k, min_candidates=1,
+                                      per_way=True)
+            qs, ss, als, ds, fs = c.query, c.seg, c.along, c.dist, c.foot
+            ps = xy[sl][qs]
+            if q is not None:
+                far = np.flatnonzero(np.hypot(*(xy[sl] - q[sl]).T) > radius[sl])
+                if len(far):
+                    e = self.graph.candidates(q[sl][far], radius[sl][far], k=K_NEIGHBOUR,
+                                              min_candidates=1, per_way=True)
+                    qe = far[e.query]          # these stand for the fix at q (an outlier)
+                    de = np.hypot(*(xy[sl][qe] - e.foot).T)
+                    qs, ss, als, ds, fs = (np.concatenate([qs, qe]), np.concatenate([ss, e.seg]),
+                                           np.concatenate([als, e.along]),
+                                           np.concatenate([ds, de]),
+                                           np.concatenate([fs, e.foot]))
+                    ps = np.concatenate([ps, q[sl][qe]])
+                    o = np.lexsort((ds, qs))
+                    qs, ss, als, ds, fs, ps = qs[o], ss[o], als[o], ds[o], fs[o], ps[o]
+            m = len(xy[sl])
+            offs.append(np.searchsorted(qs, np.arange(m + 1), side="left")[1:] + total)
+            total += len(qs)
+            segs.append(ss)
+            alongs.append(als)
+            dists.append(ds)
+            feet.append(fs)
+            poss.append(ps)
         return (np.concatenate(offs), np.concatenate(segs), np.concatenate(alongs),
-                np.concatenate(dists), np.concatenate(feet))
+                np.concatenate(dists), np.concatenate(feet), np.concatenate(poss))
 
     def match(self, t, xy, sigma=None) -> MatchResult:
         """Match fixes given in local metres of the graph; see :class:`MatchResult`."""
@@ -538,9 +644,11 @@ class HmmMatcher:
         radius = np.repeat([m.radius for m in per], sizes)
         beta = np.repeat([m.beta for m in per], sizes)
         backtrack = np.repeat([m.backtrack for m in per], sizes)
-        off, seg, along, dist, foot = self._candidates(xy, radius)
+        q = neighbour_points(xy, bounds)
+        off, seg, along, dist, foot, pos = self._candidates(xy, radius, q)
         query = np.repeat(np.arange(n), np.diff(off))
-        em = self.emission(dist, sig[query])
+        em = self.emission(dist, sig[query]) * stationary_weight(
+            xy, bounds, self.stationary_k * sig, self.stationary_a)[query]
         d_gc = np.hypot(*(xy[1:] - xy[:-1]).T)
         dt = np.diff(ts)
         dt[bounds[1:-1] - 1] = np.inf          # a new track: no transition, the chain restarts
@@ -548,40 +656,53 @@ class HmmMatcher:
         r_ep = np.maximum(radius[1:], radius[:-1]) if n > 1 else np.zeros(0)
         fastest = self.max_speed * np.minimum(dt, self.max_gap) + 2 * r_ep
         cut = self.cut
-        lim = np.minimum(d_gc + cut * beta[:-1], fastest)
+        # the farthest apart two positions of consecutive fixes can be (fix or neighbours')
+        far = np.where(np.hypot(*(xy - q).T) > radius, np.hypot(*(xy - q).T), 0.0)
+        lim = np.minimum(d_gc + far[1:] + far[:-1] + cut * beta[:-1], fastest)
         score = np.empty(len(seg))
         alpha = np.empty(len(seg))
-        bet = np.zeros(len(seg))
+        bet = np.ones(len(seg))
         back = np.full(len(seg), -1, np.int64)
         e0 = slice(off[0], off[1])
         score[e0] = em[e0] - em[e0].max()
-        alpha[e0] = score[e0]
+        alpha[e0] = np.exp(score[e0] / self.temperature)
+        alpha[e0] /= alpha[e0].sum()
         seg_u, seg_v, seg_len = self._g
         kmax = int(np.diff(off).max()) if n else 1
-        T = np.empty((kmax, kmax))
         gap = np.empty((kmax, kmax))
         windows = [(a, min(a + self.window, n - 1)) for a in range(0, n - 1, self.window)]
         stamp = self._stamp[0]
+        inv_temp = 1.0 / self.temperature
+        stored = []                            # transition weights of each window
         for a, b in windows:
             self._ensure_rows(a, b, off, seg, lim, backtrack, forced)
-            _forward(a, b, off, seg, along, foot, em, d_gc, forced, lim, fastest, seg_u, seg_v,
-                     seg_len, self.cache.arrays, beta, backtrack, self.log_break, cut, score,
-                     back, alpha, T, gap, self._scratch, stamp)
-        for a, b in windows[::-1]:
-            self._ensure_rows(a, b, off, seg, lim, backtrack, forced)
-            _backward(a, b, off, seg, along, foot, em, d_gc, forced, lim, fastest, seg_u,
-                      seg_v, seg_len, self.cache.arrays, beta, backtrack, self.log_break, cut,
-                      bet, T, gap, self._scratch, stamp + n + 1)
-        self._stamp[0] += 2 * (n + 1)
+            k_ep = np.diff(off[a:b + 2])
+            cap = int(np.sum(k_ep[:-1] * k_ep[1:]))
+            pw = np.empty(cap, np.float32)
+            pi = np.empty(cap, np.int16)
+            pj = np.empty(cap, np.int16)
+            pstart = np.empty(b - a + 1, np.int64)
+            k = _forward(a, b, off, seg, along, foot, em, pos, forced, lim, fastest, seg_u,
+                         seg_v, seg_len, self.cache.arrays, beta, backtrack, self.log_break,
+                         cut, score, back, alpha, gap, self._scratch, stamp, inv_temp, pw,
+                         pi, pj, pstart)
+            stored.append((pw[:k].copy(), pi[:k].copy(), pj[:k].copy(), pstart))
+            del pw, pi, pj
+        for (a, b), (pw, pi, pj, pstart) in zip(windows[::-1], stored[::-1]):
+            _backward(a, b, off, em, forced, self.log_break, bet, inv_temp, pw, pi, pj,
+                      pstart)
+        del stored
+        self._stamp[0] += n + 1
         path = _backtrack(off, score, back)
         restart = back[path] < 0
         # posterior of each candidate, and of the chosen road position (candidates whose road
         # point lies within SAME_ROAD_M of the chosen one: both directions of a two-way road)
-        lp = alpha + bet
-        mx = np.maximum.reduceat(lp, off[:-1]) if n else lp
-        post = np.exp(lp - mx[query])
-        post /= np.add.reduceat(post, off[:-1])[query]
-        near = np.hypot(*(foot - foot[path][query]).T) <= SAME_ROAD_M
+        post = alpha * bet
+        post /= np.maximum(np.add.reduceat(post, off[:-1])[query], 1e-300)
+        g_xy = g.xy
+        _, _, d_road, _ = project_points_to_segments(foot[path][query], g_xy[seg_u[seg]],
+                                                     g_xy[seg_v[seg]])
+        near = d_road <= SAME_ROAD_M
         match_p = np.bincount(query, weights=post * near, minlength=n)
         mseg, malong = seg[path], along[path]
         foot = foot[path]
