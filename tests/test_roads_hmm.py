@@ -9,9 +9,11 @@ import pytest
 
 from selfnav.cli import main
 from selfnav.io.csvio import read_table, write_csv
-from selfnav.roads.hmm import HmmMatcher, transition_route_distance
+from selfnav.roads.hmm import (HmmMatcher, neighbour_points, stationary_weight,
+                               transition_route_distance)
 from selfnav.roads.routes import node_distances
-from selfnav.roads.graph import packaged_map, project_to_polyline
+from selfnav.roads.graph import (Candidates, packaged_map, project_points_to_segments,
+                                 project_to_polyline)
 from selfnav.sim.car import car_route
 
 
@@ -83,37 +85,59 @@ def test_route_distances_agree_with_networkx(maps):
 
 
 @pytest.mark.parametrize("seed", [21, 22, 23])
-def test_viterbi_kernel_agrees_with_brute_force(maps, seed):
-    """The numba kernel (transitions on the fly, windows of 2 fixes, cached route rows) finds
-    the path an exhaustive search finds over the model written out in numpy (candidates, route
-    distances by :func:`transition_route_distance`, the per-epoch cut)."""
+def test_viterbi_and_posterior_agree_with_brute_force(maps, seed):
+    """The numba kernels (transitions on the fly, windows of 2 fixes, cached route rows, pruned
+    pairs, stored weights) find the path an exhaustive search finds over the model written out
+    in numpy (route distances by :func:`transition_route_distance`, the cut, a break at every
+    transition with log p ``log_break``, the robust emission), and ``match_p`` is the
+    posterior the enumeration of every path gives."""
     g = maps["kotka_karhula"]
     traj, route, noisy = floating_car(g, seed, sigma=15.0, duration=300.0, period=5.0)
-    t, xy = traj.t[20:26], noisy[20:26]
+    t, xy = traj.t[20:26], noisy[20:26].copy()
+    xy[3] += [70.0, -40.0]                     # a multipath outlier: neighbour candidates too
     m = HmmMatcher(g, sigma=15.0, k=3, window=2)
     res = m.match(t, xy)
-    assert res.restart.tolist() == [True] + [False] * 5
-    cand = g.candidates(xy, m.radius, k=3, min_candidates=1, per_way=True)
-    off = cand.offsets(len(t))
-    em = -0.5 * (cand.dist / m.sigma) ** 2
+    bounds = np.array([0, len(t)])
+    off, seg, along, dist, foot, pos = m._candidates(xy, np.full(len(t), m.radius),
+                                                     neighbour_points(xy, bounds))
+    assert np.diff(off)[3] > 3                 # the outlier got its neighbours' roads
+    query = np.repeat(np.arange(len(t)), np.diff(off))
+    cand = Candidates(query, seg, along, np.zeros(len(seg)), dist, foot)
+    em = m.emission(dist, m.sigma) * stationary_weight(
+        xy, bounds, np.full(len(t), m.stationary_k * m.sigma), m.stationary_a)[query]
     table = {}
     for e in range(len(t) - 1):
         i, j = (a.ravel() for a in np.meshgrid(np.arange(off[e], off[e + 1]),
                                                np.arange(off[e + 1], off[e + 2]), indexing="ij"))
-        d_gc = np.hypot(*(xy[e + 1] - xy[e]))
+        d_gc = np.hypot(*(pos[j] - pos[i]).T)
         fastest = m.max_speed * (t[e + 1] - t[e]) + 2 * m.radius
-        lim = min(d_gc + 2 * m.radius + 20 * m.beta, fastest)
-        d = transition_route_distance(g, cand, i, j, backtrack=m.backtrack, limit=lim)
+        d = transition_route_distance(g, cand, i, j, backtrack=m.backtrack, limit=np.inf)
         lt = np.where(np.isfinite(d) & (d <= fastest), -np.abs(d - d_gc) / m.beta, -np.inf)
+        lt[lt < -m.cut] = -np.inf
         table.update({(a, b): v for a, b, v in zip(i, j, lt)})
     best, best_path = -np.inf, None
+    paths, logw = [], []
     for combo in itertools.product(*[range(off[e], off[e + 1]) for e in range(len(t))]):
-        v = sum(em[k] for k in combo) + sum(table[a, b] for a, b in zip(combo[:-1], combo[1:]))
+        steps = [table[a, b] for a, b in zip(combo[:-1], combo[1:])]
+        v = sum(em[k] for k in combo) + sum(max(s, m.log_break) for s in steps)
         if v > best:
             best, best_path = v, combo
-    assert np.isfinite(best)
-    np.testing.assert_array_equal(res.seg, cand.seg[list(best_path)])
-    np.testing.assert_allclose(res.along, cand.along[list(best_path)], atol=1e-9)
+        paths.append(combo)
+        logw.append(sum(em[k] for k in combo) + sum(np.logaddexp(s, m.log_break)
+                                                     for s in steps))
+    np.testing.assert_array_equal(res.seg, seg[list(best_path)])
+    np.testing.assert_allclose(res.along, along[list(best_path)], atol=1e-9)
+    w = np.exp(np.asarray(logw) - max(logw))
+    post = np.zeros(len(seg))
+    for combo, wk in zip(paths, w):
+        post[list(combo)] += wk
+    post /= w.sum()
+    chosen = foot[list(best_path)]
+    _, _, d_road, _ = project_points_to_segments(chosen[query], g.xy[g.seg_u[seg]],
+                                                 g.xy[g.seg_v[seg]])
+    ref = np.bincount(query, weights=post * (d_road <= 5.0), minlength=len(t))
+    np.testing.assert_allclose(res.match_p, ref, atol=1e-4)
+    assert not res.matched[3] and res.moved[3] > 30.0    # the outlier is not "matched"
 
 
 def test_chain_restarts_where_no_transition_is_possible(maps):

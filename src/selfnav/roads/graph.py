@@ -557,22 +557,32 @@ def _snap_dead_ends(xy, su, sv, sw, snap_m):
         seg_near.setdefault(int(ends[qe]), []).append(qs)
     splits = {}                                  # undirected segment -> [(along, end node)]
     n_snapped = 0
-    target = set()                               # nodes something was merged into
-    for e in ends.tolist():
-        if e in target:                          # another end joined this one already
-            continue
+    def root(m):
+        while rep[m] != m:
+            m = rep[m]
+        return m
+
+    def nearest_node(e):
         ways_e = node_way.get(e, set())
         best, best_d = -1, np.inf
         for m in kd.query_ball_point(xy[e], snap_m):
-            if m == e or rep[m] != m or node_way.get(m, set()) & ways_e:
+            if m == e or node_way.get(m, set()) & ways_e:
                 continue
             d = float(np.hypot(*(xy[m] - xy[e])))
             if d < best_d:
                 best, best_d = m, d
-        if best >= 0:
-            rep[e] = best
-            target.add(best)
+        return best, best_d
+
+    # the closest pairs first: an end joins the node it nearly touches, not a farther one
+    first = sorted(ends.tolist(), key=lambda e: nearest_node(e)[1])
+    for e in first:
+        ways_e = node_way.get(e, set())
+        best, _ = nearest_node(e)
+        if best >= 0 and root(best) != root(e):
+            rep[root(e)] = root(best)
             n_snapped += 1
+            continue
+        if best >= 0:                           # already joined to it through another end
             continue
         # the nearest segment of another way
         near = np.asarray([k for k in seg_near.get(e, []) if not (
@@ -588,9 +598,8 @@ def _snap_dead_ends(xy, su, sv, sw, snap_m):
         L = float(np.hypot(*(b[near[k]] - a[near[k]])))
         if s[k] < 1e-3 or s[k] > L - 1e-3:      # at a node of that way
             m = int(und[near[k], 0] if s[k] < 1e-3 else und[near[k], 1])
-            if m != e and rep[m] == m:
-                rep[e] = m
-                target.add(m)
+            if root(m) != root(e):
+                rep[root(e)] = root(m)
                 n_snapped += 1
             continue
         splits.setdefault(int(near[k]), []).append((float(s[k]), e))

@@ -401,7 +401,7 @@ MATCHED_P = 0.7
 MATCHED_GATE = 3.0
 #: ... and never farther than this from its road, m (a track whose fixes lie 100 m from every
 #: road gets a σ estimate of 50 m: its match is not plausible, whatever the σ says).
-MATCHED_MAX_M = 50.0
+MATCHED_MAX_M = 30.0
 #: Roads near the neighbours' interpolation a far-off fix gets as candidates besides its own.
 K_NEIGHBOUR = 4
 #: The posterior (``match_p``) is computed with every log probability divided by this: the model
