@@ -391,9 +391,9 @@ def _backtrack(off, score, back):  # pragma: no cover - numba
 SIGMA_MIN_M = 3.0
 #: Log probability of a break (the chain restarts: a connection the map lacks, a jump no road
 #: explains) at each transition.
-LOG_BREAK = -12.0
+LOG_BREAK = -20.0
 #: Share of fixes from the wide (multipath) part of the emission, and its σ (m; at least 3σ).
-OUTLIER_P = 0.02
+OUTLIER_P = 0.001
 OUTLIER_SIGMA_M = 100.0
 #: A fix is flagged ``matched`` when the posterior of its road is at least MATCHED_P, its
 #: distance to the road at most MATCHED_GATE σ, and it is not alone in its piece of chain.
@@ -505,7 +505,7 @@ class HmmMatcher:
         self.stationary_k = float(stationary_k)
         self.stationary_a = float(stationary_a)
         self.log_break = float(log_break)
-        self.cut = abs(self.log_break) + 6.0
+        self.cut = abs(self.log_break) + 2.0
         self.outlier_p = float(outlier_p)
         self.outlier_sigma = float(outlier_sigma)
         self.matched_p = float(matched_p)
