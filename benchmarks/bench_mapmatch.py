@@ -638,7 +638,7 @@ def section_acceptance(graphs):
                   f"{100 * raw.mean():.1f} % |", flush=True)
 
 
-_FMM_E2E = """
+_FMM_E2E = r"""
 import csv, sys, time
 import numpy as np
 import fastmm
