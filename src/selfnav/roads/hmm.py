@@ -1,25 +1,33 @@
-"""GNSS-only map matching: a hidden Markov model with Viterbi decoding (DESIGN §7, issue 5).
+"""GNSS-only map matching: a hidden Markov model with Viterbi decoding and forward-backward
+posteriors (DESIGN §7, issues 5, 14 and 21).
 
 The model follows Newson & Krumm (2009, "Hidden Markov map matching through noise and
-sparseness"):
+sparseness"), with what real fleets need (issue 21):
 
 * **states** at each fix are road candidates: the closest point of each nearby road (one per
-  OSM way and direction) within a search radius, from :meth:`selfnav.roads.graph.RoadGraph.candidates`;
-  a fix with no road inside the radius gets its nearest road, so that *every* fix is matched;
-* **emission**: Gaussian in the distance between fix and candidate,
-  ``log p = -½ (d/σ)²`` with σ the fix's ``sigma_m`` (or the default);
+  OSM way and direction) within a search radius, from
+  :meth:`selfnav.roads.graph.RoadGraph.candidates` (the nearest always among them); a fix with no road inside the radius gets its nearest road,
+  so that *every* fix is matched; a fix far from where its neighbours put it (multipath) also
+  gets the roads near that point (:meth:`HmmMatcher._candidates`);
+* **emission**: Gaussian in the distance between fix and candidate with a small wide part
+  (:meth:`HmmMatcher.emission`), σ the fix's ``sigma_m`` (or the track's); a stationary run's
+  fixes weigh 1/N (:func:`stationary_weight`);
 * **transition**: exponential in the difference between the route distance over the directed
   graph (one-ways respected) and the straight-line distance between the two fixes,
   ``log p = -|d_route - d_gc| / β``; a small backwards move on the same road (≤ ``backtrack``
   metres, a stopped car in noise) counts as its length; transitions faster than ``max_speed``
   are impossible;
-* **breaks**: where no transition is possible (a gap, or a jump no road explains) the chain
-  restarts from the emission probabilities alone, and decoding continues.
+* **breaks**: from any candidate to any candidate of the next fix, ``log p = LOG_BREAK``:
+  where no transition is possible or plausible (candidates the map does not connect, a route
+  much longer than the displacement) the chain breaks and restarts, each piece matched on its
+  own; a time gap over ``max_gap`` (or a new track) allows only a break;
+* **match_p**: the forward-backward posterior that the chosen road point is on the driven
+  road; **matched**: the match is plausible (:class:`MatchResult`).
 
 Route distances come from a :class:`~selfnav.roads.routes.RouteCache` (bounded Dijkstra per
-candidate end node, kept and reused across fixes and tracks); the Viterbi recursion is one numba
-kernel that computes each transition on the fly, so nothing of size (fixes × k²) is ever stored
-and memory is O(N k). Long tracks are processed in windows (candidate search, route rows).
+candidate end node, kept and reused across fixes and tracks); the forward pass is one numba
+kernel that computes each transition on the fly and stores only the weights it used (for the
+backward pass), so memory is O(N k) plus those. Long tracks are processed in windows.
 
 A GNSS-only matcher cannot hold the road through long outlier windows (DESIGN §7): the
 inertial prediction is what does (the navigator). :func:`transition_route_distance` and the
@@ -483,10 +491,13 @@ class HmmMatcher:
     Notes
     -----
     The route distance between the two road nodes of a transition is searched up to
-    ``d_gc + 2 radius + 20 β`` (``d_gc``: straight-line distance between the fixes), and never
-    beyond what ``max_speed`` allows in the time between the fixes; a longer route is no
-    transition. Memory is O(N k) for N fixes (about 0.5 kB per fix with k = 16) plus a bounded
-    route store.
+    ``d_gc + (|log_break| + 2) β`` (``d_gc``: straight-line distance between the fixes; a
+    longer route loses to a break), and never beyond what ``max_speed`` allows in the time
+    between the fixes. Memory is O(N k) for N fixes (about 4 kB per fix with k = 16: Viterbi
+    scores, forward and backward sums, the stored transition weights) plus a bounded route
+    store. ``log_break``, ``outlier_p``, ``outlier_sigma``, ``matched_p``, ``matched_gate``,
+    ``temperature`` (of the posterior only), ``stationary_k`` and ``stationary_a``: the
+    module's constants of the same names.
 
     Examples
     --------
