@@ -359,8 +359,8 @@ def match_files(gnss, map_path, out, *, route_out=None, sigma_m: float | None = 
     The output keeps each input row (in time order within its track, repeated stamps sharing
     their merged fix), the input's ``track_id`` and time text; columns ``t, lat_deg, lon_deg,
     h_m, cross_m, way_id, matched, match_p, piece``. ``route_out``: the driven routes as
-    GeoJSON. A track that cannot be matched gets one warning line naming it and its file line and is left out; if no
-    track can be matched the call fails and writes nothing.
+    GeoJSON. A track that cannot be matched gets one warning line naming it and its file line
+    and is left out; if no track can be matched the call fails and writes nothing.
 
     ``progress(done, total)`` is called as tracks finish.
     """
