@@ -32,7 +32,8 @@ from selfnav.gnss.atmosphere import (KLOBUCHAR_DEFAULT, azimuth_elevation, klobu
                                      klobuchar_bds, saastamoinen)
 from selfnav.gnss.ephemeris import group_delay, satellite_states, select_ephemeris
 from selfnav.gnss.fde import VarianceScale, fde_epoch
-from selfnav.gnss.spp import C_LIGHT, OMEGA_EARTH, SppConfig, SppResult, sagnac_rotate, solve_spp
+from selfnav.gnss.spp import (C_LIGHT, OMEGA_EARTH, SppConfig, SppResult, observation_variance,
+                              sagnac_rotate, solve_spp)
 from selfnav.io.gnss_raw import (BDT_OFFSET_S, BEIDOU, GALILEO, GLONASS, GPS, QZSS,
                                  GnssObservations,
                                  RawGnss, frequency, sat_names)
@@ -59,6 +60,8 @@ class RawSppConfig:
     systems : tuple of system codes used
     elevation_mask_deg : satellites below are not used
     ionosphere, troposphere : apply the Klobuchar / Saastamoinen corrections
+    smoothing_s : time constant (s) of the Doppler-aided code smoothing (:func:`smooth_code`);
+        0 switches it off
     doppler_sigma0 : m/s, range-rate σ at ``spp.cn0_ref``
     velocity : solve the Doppler velocity
     """
@@ -71,6 +74,7 @@ class RawSppConfig:
     troposphere: bool = True
     doppler_sigma0: float = 0.1
     velocity: bool = True
+    smoothing_s: float = 100.0
 
 
 @dataclass
@@ -116,6 +120,81 @@ def select_signals(obs: GnssObservations, systems) -> np.ndarray:
     return idx[first]
 
 
+def smooth_code(obs: GnssObservations, tau_s: float = 100.0, jump_sigma: float = 5.0):
+    """Doppler-aided code smoothing (the Hatch (1982) filter with the integrated Doppler in
+    place of the carrier phase), causal, per satellite and signal::
+
+        p_k = ρ̂_{k−1} + ½ (ρ̇_k + ρ̇_{k−1}) Δt + δ_k                    prediction, ρ̇ = −λ D
+        ρ̂_k = ρ_k / N_k + (1 − 1/N_k) p_k,      N_k = min(N_{k−1} + 1, τ / Δt)
+
+    ``δ_k`` is the median over the satellites of the epoch of ``ρ_k − (p_k − δ_k)``: a
+    receiver clock step (phones steer their clock, u-blox receivers jump it by milliseconds)
+    moves every pseudorange and no Doppler; a few faulty satellites do not move the median.
+
+    **Code faults.** When a pseudorange departs from its prediction by more than
+    ``jump_sigma · s`` (``s`` the satellite's running σ of ``ρ − p``, started from the
+    receiver's σ or 5 m), the code is not used and the range coasts on the Doppler
+    (``ρ̂_k = p_k``) for up to ``τ``: a step, or a ramp faster than the smoother follows, on one
+    satellite's code is bridged by its own Doppler; after ``τ`` of disagreement the code is
+    taken again (restart, ``N = 1``). A gap (over 3 median intervals) or a missing Doppler
+    restarts too. Returns the smoothed pseudoranges, ``N`` and a flag per observation (True:
+    the code was not used, coasting).
+    """
+    pr = obs.pseudorange.copy()
+    N = np.ones(len(obs))
+    coasting = np.zeros(len(obs), bool)
+    if tau_s <= 0 or len(obs) == 0:
+        return pr, N, coasting
+    rr = -obs.doppler * C_LIGHT / obs.frequency
+    keys = list(zip(obs.system.tolist(), obs.prn.tolist(), [str(c) for c in obs.signal]))
+    sig0 = np.where(np.isfinite(obs.pr_sigma) & (obs.pr_sigma > 0), obs.pr_sigma, 5.0)
+    t_ep, ep = np.unique(obs.t, return_inverse=True)
+    dt_med = float(np.median(np.diff(t_ep))) if len(t_ep) > 1 else 1.0
+    nmax = max(1.0, tau_s / max(dt_med, 1e-3))
+    order = np.argsort(ep, kind="stable")
+    bounds = np.searchsorted(ep[order], np.arange(len(t_ep) + 1))
+    state: dict = {}          # key -> [ρ̂, N, s², t, ρ̇, coasting since (t) or None]
+    for e in range(len(t_ep)):
+        rows = order[bounds[e]:bounds[e + 1]]
+        cont, pred, inn = [], [], []
+        for i in rows:
+            st = state.get(keys[i])
+            if (st is not None and obs.t[i] - st[3] <= 3 * dt_med and np.isfinite(rr[i])
+                    and np.isfinite(st[4]) and np.isfinite(pr[i])):
+                p = st[0] + 0.5 * (rr[i] + st[4]) * (obs.t[i] - st[3])
+                cont.append(i)
+                pred.append(p)
+                inn.append(pr[i] - p)
+        ok_delta = len(inn) >= 3
+        delta = float(np.median(inn)) if ok_delta else 0.0
+        done = set()
+        for i, p, d in zip(cont, pred, inn):
+            if not ok_delta:
+                break
+            st = state[keys[i]]
+            dd = d - delta
+            p = p + delta
+            if dd * dd > jump_sigma**2 * st[2]:
+                since = st[5] if st[5] is not None else obs.t[i]
+                if obs.t[i] - since < tau_s:          # coast on the Doppler
+                    pr[i], N[i], coasting[i] = p, st[1], True
+                    state[keys[i]] = [p, st[1], st[2], obs.t[i], rr[i], since]
+                    done.add(i)
+                continue
+            st[2] = 0.98 * st[2] + 0.02 * dd * dd
+            n = min(st[1] + 1.0, nmax)
+            pr[i] = pr[i] / n + (1.0 - 1.0 / n) * p
+            N[i] = n
+            state[keys[i]] = [pr[i], n, st[2], obs.t[i], rr[i], None]
+            done.add(i)
+        for i in rows:
+            if i not in done:
+                st = state.get(keys[i])
+                s2 = st[2] if st is not None else 2.0 * sig0[i] ** 2
+                state[keys[i]] = [pr[i], 1.0, s2, obs.t[i], rr[i], None]
+    return pr, N, coasting
+
+
 def _corrections(raw: RawGnss, obs: GnssObservations, cfg: RawSppConfig):
     """Satellite states and corrected pseudoranges of the selected observations."""
     eph = raw.eph
@@ -141,7 +220,8 @@ def _corrections(raw: RawGnss, obs: GnssObservations, cfg: RawSppConfig):
     tgd = group_delay(eph, ie, obs.system, obs.signal)
     pr = obs.pseudorange + C_LIGHT * (clk - tgd)
     ok = np.all(np.isfinite(pos), axis=1) & np.isfinite(pr)
-    return obs.select(ok), pos[ok], vel[ok], drift[ok], pr[ok], t_tx[ok]
+    kept = np.flatnonzero(keep)[ok]
+    return obs.select(ok), pos[ok], vel[ok], drift[ok], pr[ok], t_tx[ok], kept
 
 
 def ionosphere_delay(raw: RawGnss, t, lat, lon, az, el, freq):
@@ -174,7 +254,13 @@ def spp_raw(raw: RawGnss, cfg: RawSppConfig | None = None) -> RawSppResult:
     if len(obs) == 0:
         raise InputError(raw.source, "no pseudorange of a supported signal (GPS, Galileo, "
                                      "BeiDou, GLONASS, QZSS)")
-    obs, sat, sat_vel, sat_drift, pr, t_tx = _corrections(raw, obs, cfg)
+    pr_s, n_smooth, coasting = smooth_code(obs, cfg.smoothing_s)
+    nmax = np.maximum(cfg.smoothing_s / _median_interval(obs), 1.0) if cfg.smoothing_s > 0 else 1.0
+    obs.pseudorange = pr_s
+    obs, sat, sat_vel, sat_drift, pr, t_tx, keep = _corrections(raw, obs, cfg)
+    # variance of a smoothed pseudorange: σ² (1/N + 1/N_max): the white part averages down,
+    # a share as large as one full window's does not (multipath is correlated)
+    smooth_factor = 1.0 / n_smooth[keep] + 1.0 / nmax
     # coarse all-satellite fix for the line-of-sight geometry
     coarse = solve_spp(obs.t, pr, None, sat, obs.system, None, obs.cn0,
                        SppConfig(weighting="cn0", raim=False))
@@ -192,10 +278,18 @@ def spp_raw(raw: RawGnss, cfg: RawSppConfig | None = None) -> RawSppResult:
     obs, sat, sat_vel, sat_drift = obs.select(m), sat[m], sat_vel[m], sat_drift[m]
     prc = (pr - iono - tropo)[m]
     az, el, iono, tropo = az[m], el[m], iono[m], tropo[m]
-    res = solve_spp(obs.t, prc, None, sat, obs.system, el, _cn0(obs), cfg.spp)
+    var = observation_variance(np.full(len(obs), cfg.spp.sigma0**2), el, _cn0(obs), cfg.spp)
+    var = var * smooth_factor[m]
+    res = solve_spp(obs.t, prc, var, sat, obs.system, el, _cn0(obs),
+                    replace(cfg.spp, weighting="variance", variance_scale=1.0))
     out = _finish(raw, cfg, obs, res, sat, sat_vel, sat_drift, az, el, iono, tropo)
     out.stats["ionosphere"] = iono_model
     return out
+
+
+def _median_interval(obs):
+    ep = np.unique(obs.t)
+    return float(np.median(np.diff(ep))) if len(ep) > 1 else 1.0
 
 
 def _cn0(obs):

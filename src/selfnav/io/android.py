@@ -26,8 +26,8 @@ from pathlib import Path
 import numpy as np
 
 from selfnav.errors import InputError
-from selfnav.io.gnss_raw import (BEIDOU, GALILEO, GLONASS, GPS, LEAP_SECONDS, QZSS, SBAS,
-                                 Ephemerides, GnssObservations, RawGnss)
+from selfnav.io.gnss_raw import (BEIDOU, GALILEO, GLONASS, GPS, QZSS, SBAS, Ephemerides,
+                                 GnssObservations, RawGnss, leap_seconds_at)
 from selfnav.types import GnssData
 
 C_LIGHT = 299_792_458.0
@@ -148,10 +148,25 @@ def read_gnsslogger(path) -> RawGnss:
     if not np.any(full_bias != 0):
         raise InputError(path, "FullBiasNanos is 0 on every row: the phone had no GPS time "
                                "(no pseudoranges can be formed)")
-    # reception time, GPS ns since the GPS epoch: integer part and fraction kept apart
-    t_int = time_ns - full_bias
-    t_frac = offset - bias
-    leap = np.where(np.isfinite(leap_col), leap_col, LEAP_SECONDS).astype(np.int64)
+    # reception time, GPS ns since the GPS epoch, integer part and fraction kept apart. As in
+    # ProcessGnssMeas.m, the bias of the first row of each stretch of continuous hardware
+    # clock is used for the whole stretch: the phone re-estimates FullBiasNanos + BiasNanos at
+    # every epoch, and following those steps would put clock jumps into the pseudoranges that
+    # the Doppler does not have; the receiver clock (and its drift) is estimated instead
+    disc = ints("HardwareClockDiscontinuityCount") if "HardwareClockDiscontinuityCount" in col \
+        else np.zeros(len(rows), np.int64)
+    seg_start = np.r_[True, disc[1:] != disc[:-1]]
+    valid_bias = full_bias != 0
+    first = np.zeros(len(rows), int)
+    cur = -1
+    for k in range(len(rows)):
+        if seg_start[k] or cur < 0 or not valid_bias[cur]:
+            cur = k
+        first[k] = cur
+    t_int = time_ns - full_bias[first]
+    t_frac = offset - bias[first]
+    leap_date = leap_seconds_at(float(np.median(time_ns - full_bias)) * 1e-9)
+    leap = np.where(np.isfinite(leap_col), leap_col, leap_date).astype(np.int64)
     rx_sys = np.mod(t_int, WEEK_NS)
     bds = system == BEIDOU
     rx_sys = np.where(bds, np.mod(t_int - 14 * 10**9, WEEK_NS), rx_sys)
@@ -171,7 +186,7 @@ def read_gnsslogger(path) -> RawGnss:
     valid = (keep & (full_bias != 0) & ((state & CODE_LOCK) != 0) & resolved
              & ~(sv_unc >= 500) & (pr > 1e7) & (pr < 5e7))
     pr = np.where(valid, pr, np.nan)
-    t = (t_int.astype(float) + t_frac) * 1e-9
+    t = (t_int.astype(float) + t_frac) * 1e-9      # the reception time the ranges refer to
     # epochs: one time tag per TimeNanos (the rows of an epoch share it)
     _, ep = np.unique(time_ns, return_inverse=True)
     t_ep = np.array([t[ep == k].min() for k in range(ep.max() + 1)])[ep]

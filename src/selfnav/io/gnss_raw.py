@@ -46,6 +46,27 @@ _BAND_FREQ = {
 }
 
 
+_GPS_EPOCH = np.datetime64("1980-01-06T00:00:00", "ns")
+#: (first day, GPST − UTC) for the leap seconds since 1999
+_LEAPS = (("1999-01-01", 13), ("2006-01-01", 14), ("2009-01-01", 15), ("2012-07-01", 16),
+          ("2015-07-01", 17), ("2017-01-01", 18))
+
+
+def datetime_to_gps_seconds(dt64) -> np.ndarray:
+    """numpy datetime64 (read as GPST) → seconds since the GPS epoch."""
+    d = np.asarray(dt64, "datetime64[ns]")
+    return (d - _GPS_EPOCH).astype("timedelta64[ns]").astype(np.int64) / 1e9
+
+
+def leap_seconds_at(gps_seconds) -> int:
+    """GPST − UTC (s) at a GPS time (table since 1999; 18 after 2017)."""
+    leap = 13
+    for day, n in _LEAPS:
+        if gps_seconds >= datetime_to_gps_seconds(np.datetime64(day)) + n:
+            leap = n
+    return leap
+
+
 def frequency(system, signal, glo_k=0):
     """Carrier frequency (Hz) of a signal; NaN when unknown. GLONASS G1/G2 FDMA:
     1602 + 0.5625 k MHz, 1246 + 0.4375 k MHz (ICD GLONASS 2008, Table 3.1)."""

@@ -20,28 +20,8 @@ import numpy as np
 from selfnav.errors import InputError
 from selfnav.io.gnss_raw import (BDT_OFFSET_S, BDT_WEEK0, BEIDOU, GALILEO, GLONASS, GPS,
                                  GPS_WEEK_S, LETTER_SYSTEMS, QZSS, Ephemerides,
-                                 GnssObservations, RawGnss)
-
-_GPS_EPOCH = np.datetime64("1980-01-06T00:00:00", "ns")
-#: (first day, GPST − UTC) for the leap seconds since 1999
-_LEAPS = (("1999-01-01", 13), ("2006-01-01", 14), ("2009-01-01", 15), ("2012-07-01", 16),
-          ("2015-07-01", 17), ("2017-01-01", 18))
-
-
-def datetime_to_gps_seconds(dt64) -> np.ndarray:
-    """numpy datetime64 (read as GPST) → seconds since the GPS epoch."""
-    d = np.asarray(dt64, "datetime64[ns]")
-    return (d - _GPS_EPOCH).astype("timedelta64[ns]").astype(np.int64) / 1e9
-
-
-def leap_seconds_at(gps_seconds) -> int:
-    """GPST − UTC (s) at a GPS time (table since 1999; 18 after 2017)."""
-    leap = 13
-    for day, n in _LEAPS:
-        if gps_seconds >= datetime_to_gps_seconds(np.datetime64(day)) + n:
-            leap = n
-    return leap
-
+                                 GnssObservations, RawGnss, datetime_to_gps_seconds,
+                                 leap_seconds_at)
 
 def _load(path):
     import georinex as gr
