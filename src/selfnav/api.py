@@ -600,8 +600,6 @@ def spp(gnss_raw, nav=None, *, fmt: str = "auto", elevation_mask_deg: float = 5.
                       np.full((n, 3, 3), np.nan), source=f"selfnav spp {raw.source}")
     sig = r.sigma_enu[ok]
     cols = {"sigma_h_m": np.hypot(sig[:, 0], sig[:, 1]), "sigma_m": r.sigma_m[ok]}
-    if not full_vel and np.any(np.isfinite(vel)):
-        cols.update(ve=vel[:, 0], vn=vel[:, 1], vu=vel[:, 2])
     if np.any(np.isfinite(vel)):
         sv = res.sigma_vel_enu[ok]
         cols["sigma_vel_mps"] = np.sqrt(0.5 * (sv[:, 0] ** 2 + sv[:, 1] ** 2))

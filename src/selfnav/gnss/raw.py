@@ -262,7 +262,7 @@ def spp_raw(raw: RawGnss, cfg: RawSppConfig | None = None) -> RawSppResult:
     # a share as large as one full window's does not (multipath is correlated)
     smooth_factor = 1.0 / n_smooth[keep] + 1.0 / nmax
     # coarse all-satellite fix for the line-of-sight geometry
-    coarse = solve_spp(obs.t, pr, None, sat, obs.system, None, obs.cn0,
+    coarse = solve_spp(obs.t, pr, None, sat, obs.system, None, _cn0(obs),
                        SppConfig(weighting="cn0", raim=False))
     ep = np.searchsorted(coarse.t, obs.t)
     rx = coarse.ecef[ep]
