@@ -541,7 +541,7 @@ def read_gnss_raw(path, nav=None, *, fmt: str = "auto"):
 
 
 def spp(gnss_raw, nav=None, *, fmt: str = "auto", elevation_mask_deg: float = 5.0,
-        smoothing_s: float = 100.0, fde: bool = True, systems=None, alpha: float = 1e-3):
+        smoothing_s: float = 30.0, fde: bool = True, systems=None, alpha: float = 1e-3):
     """Single-point positions, Doppler velocities and per-epoch satellite exclusions of a raw
     GNSS record (docs/gnss.md).
 

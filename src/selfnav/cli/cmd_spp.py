@@ -32,7 +32,7 @@ def register(app: typer.Typer) -> None:
             help="Satellites below this elevation are not used.")] = 5.0,
         smoothing_s: Annotated[float, typer.Option(
             "--smoothing-s", min=0.0,
-            help="Time constant of the Doppler-aided code smoothing, s (0: off).")] = 100.0,
+            help="Time constant of the Doppler-aided code smoothing, s (0: off).")] = 30.0,
         systems: Annotated[Optional[str], typer.Option(
             "--systems", help="Constellations to use, RINEX letters (e.g. GEC); default all "
                               "of G, R, E, C, J.")] = None,

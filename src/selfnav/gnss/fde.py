@@ -34,10 +34,12 @@ Teunissen's DIA procedure (detection, identification, adaptation) with multiple
 alternative hypotheses; compare Knight & Wang (2009), "A comparison of outlier detection
 procedures and robust estimation methods in GPS positioning", J. Navigation 62(4).
 
-:class:`VarianceScale` calibrates the a-priori σ causally: the median of the squared
+:class:`VarianceScale` calibrates the a-priori σ causally: the lower quartile of the squared
 normalized residuals of the past epochs (all satellites, excluded ones against the kept
-solution) divided by the median of χ²₁ (0.4549) is the variance factor by which the weights
-of the next epoch are scaled; faults below half of the residuals do not move it.
+solution) divided by the lower quartile of χ²₁ (0.1015) is the variance factor by which the
+weights of the next epoch are scaled; biased residuals up to three quarters of the set do not
+move it (with the median, a street where a third of the signals are reflected inflated the σ
+until the reflections passed the test).
 """
 from __future__ import annotations
 
@@ -50,6 +52,11 @@ import numpy as np
 from scipy.stats import chi2
 
 MEDIAN_CHI2_1 = 0.454936423119572
+#: the quantile of the squared normalized residuals the variance factor is read from, and
+#: that quantile of χ²₁: the lower quartile stays consistent with up to 3/4 of the residuals
+#: biased (several reflected signals at once in a street)
+SCALE_QUANTILE = 0.25
+CHI2_1_Q25 = 0.10153104426762142
 
 
 @dataclass
@@ -203,8 +210,8 @@ def _readmit(H, r, w, mask, alpha):
 
 
 class VarianceScale:
-    """Causal variance factor of the a-priori σ (module docstring): the median of the squared
-    normalized residuals of the last ``window`` residuals, over the median of χ²₁, clipped to
+    """Causal variance factor of the a-priori σ (module docstring): the lower quartile of the
+    squared normalized residuals of the last ``window`` residuals, over that of χ²₁, clipped to
     ``[lo, hi]``. Until ``min_count`` residuals are in, the current epoch's own normalized
     residuals (``current``) join them; with none at all, ``1``."""
 
@@ -220,7 +227,7 @@ class VarianceScale:
             data += (c[np.isfinite(c)] ** 2).tolist()
         if not data:
             return 1.0
-        return float(np.clip(np.median(data) / MEDIAN_CHI2_1, self.lo, self.hi))
+        return float(np.clip(np.quantile(data, SCALE_QUANTILE) / CHI2_1_Q25, self.lo, self.hi))
 
     def add(self, z) -> None:
         z = np.asarray(z, float)

@@ -74,7 +74,7 @@ class RawSppConfig:
     troposphere: bool = True
     doppler_sigma0: float = 0.1
     velocity: bool = True
-    smoothing_s: float = 100.0
+    smoothing_s: float = 30.0
 
 
 @dataclass
@@ -120,7 +120,8 @@ def select_signals(obs: GnssObservations, systems) -> np.ndarray:
     return idx[first]
 
 
-def smooth_code(obs: GnssObservations, tau_s: float = 100.0, jump_sigma: float = 5.0):
+def smooth_code(obs: GnssObservations, tau_s: float = 30.0, jump_sigma: float = 5.0,
+                coast_s: float = 120.0):
     """Doppler-aided code smoothing (the Hatch (1982) filter with the integrated Doppler in
     place of the carrier phase), causal, per satellite and signal::
 
@@ -134,9 +135,9 @@ def smooth_code(obs: GnssObservations, tau_s: float = 100.0, jump_sigma: float =
     **Code faults.** When a pseudorange departs from its prediction by more than
     ``jump_sigma · s`` (``s`` the satellite's running σ of ``ρ − p``, started from the
     receiver's σ or 5 m), the code is not used and the range coasts on the Doppler
-    (``ρ̂_k = p_k``) for up to ``τ``: a step, or a ramp faster than the smoother follows, on one
-    satellite's code is bridged by its own Doppler; after ``τ`` of disagreement the code is
-    taken again (restart, ``N = 1``). A gap (over 3 median intervals) or a missing Doppler
+    (``ρ̂_k = p_k``) for up to ``coast_s``: a step, or a ramp faster than the smoother follows,
+    on one satellite's code is bridged by its own Doppler; after ``coast_s`` of disagreement
+    the code is taken again (restart, ``N = 1``). A gap (over 3 median intervals) or a missing Doppler
     restarts too. Returns the smoothed pseudoranges, ``N`` and a flag per observation (True:
     the code was not used, coasting).
     """
@@ -176,7 +177,7 @@ def smooth_code(obs: GnssObservations, tau_s: float = 100.0, jump_sigma: float =
             p = p + delta
             if dd * dd > jump_sigma**2 * st[2]:
                 since = st[5] if st[5] is not None else obs.t[i]
-                if obs.t[i] - since < tau_s:          # coast on the Doppler
+                if obs.t[i] - since < coast_s:        # coast on the Doppler
                     pr[i], N[i], coasting[i] = p, st[1], True
                     state[keys[i]] = [p, st[1], st[2], obs.t[i], rr[i], since]
                     done.add(i)
