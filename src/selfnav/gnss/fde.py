@@ -134,6 +134,8 @@ def fde_epoch(H, r, var, *, alpha: float = 1e-3, max_exclusions: int | None = No
     if not ok[0] and kmax > 0:
         found = None
         cand_mask, cand_ratio = full[0], T[0] / thr[0]
+        pen = chi2.ppf(1.0 - alpha, 1)          # what one more exclusion must buy
+        best_score = np.inf
         k = 0
         for k in range(1, kmax + 1):
             if comb(n, k) > max_subsets:
@@ -150,9 +152,14 @@ def fde_epoch(H, r, var, *, alpha: float = 1e-3, max_exclusions: int | None = No
             ratio = np.where(valid, Ts / _threshold(dofs, alpha), np.inf)
             j = int(np.argmin(ratio))
             cand_mask, cand_ratio = masks[j], ratio[j]
-            if ratio[j] <= 1.0:
-                found = masks[j]
+            if found is not None:
+                # one more exclusion only if it lowers T by more than a single-satellite test
+                if Ts[j] + pen * k < best_score and ratio[j] <= 1.0:
+                    found, best_score = masks[j], Ts[j] + pen * k
+                    continue
                 break
+            if ratio[j] <= 1.0:
+                found, best_score = masks[j], Ts[j] + pen * k
         if found is None:
             # backward elimination from the best subset of the last exhaustive level
             m = cand_mask.copy()

@@ -13,15 +13,17 @@ exact rotation of :func:`selfnav.gnss.spp.sagnac_rotate`). Range rate with recei
 ``v``, satellite velocity ``v^s``, receiver clock drift ``d`` (m/s) and satellite clock drift
 ``d^s`` (m/s)::
 
-    ρ̇ = u·(v^s − v) + (Ω/c)(v^s_y x + y^s v_x − v^s_x y − x^s v_y) + d − d^s,
+    ρ̇ = u·(v^s − v) + (Ω/c)(v^s_x y + x^s v_y − v^s_y x − y^s v_x) + d − d^s,
     u = (r^s − r)/|r^s − r|                                                               (2)
 
-(RTKLIB ``resdop``). A Doppler D (Hz) on carrier λ is ``ρ̇ = −λ D``. Jacobians (exact
+the time derivative of (1). (RTKLIB's ``resdop`` writes the rotation term with the opposite
+sign, ``(Ω/c)(v^s_y x + y^s v_x − v^s_x y − x^s v_y)``: up to 6 mm/s, twice the term; the
+test checks (2) against a numerical derivative of (1).) A Doppler D (Hz) on carrier λ is ``ρ̇ = −λ D``. Jacobians (exact
 derivatives of (1), (2))::
 
     ∂ρ/∂r = −uᵀ + (Ω/c)(−y^s, x^s, 0),   ∂ρ/∂b = 1
-    ∂ρ̇/∂r = −(Δv − u (u·Δv))ᵀ / |r^s − r| + (Ω/c)(v^s_y, −v^s_x, 0),   Δv = v^s − v
-    ∂ρ̇/∂v = −uᵀ + (Ω/c)(y^s, −x^s, 0),   ∂ρ̇/∂d = 1
+    ∂ρ̇/∂r = −(Δv − u (u·Δv))ᵀ / |r^s − r| + (Ω/c)(−v^s_y, v^s_x, 0),   Δv = v^s − v
+    ∂ρ̇/∂v = −uᵀ + (Ω/c)(−y^s, x^s, 0),   ∂ρ̇/∂d = 1
 
 :func:`ecef_to_enu_jacobian` and :func:`ecef_to_geodetic_jacobian` turn the position (and
 velocity) columns into ENU metres or (lat, lon, h) errors for a filter whose state is not ECEF.
@@ -90,16 +92,16 @@ def doppler_model(r_rx_ecef, v_rx_ecef, clock_drift_mps, sat_ecef, sat_vel_ecef,
     dv = vs - v
     udv = np.sum(u * dv, axis=-1)
     k = OMEGA_EARTH / C_LIGHT
-    rate = (udv + k * (vs[..., 1] * r[..., 0] + s[..., 1] * v[..., 0] - vs[..., 0] * r[..., 1]
-                       - s[..., 0] * v[..., 1])
+    rate = (udv + k * (vs[..., 0] * r[..., 1] + s[..., 0] * v[..., 1] - vs[..., 1] * r[..., 0]
+                       - s[..., 1] * v[..., 0])
             + np.asarray(clock_drift_mps) - np.asarray(sat_clock_drift_mps))
     dr = -(dv - u * udv[..., None]) / rng[..., None]
     H = np.empty(u.shape[:-1] + (7,))
-    H[..., 0] = dr[..., 0] + k * vs[..., 1]
-    H[..., 1] = dr[..., 1] - k * vs[..., 0]
+    H[..., 0] = dr[..., 0] - k * vs[..., 1]
+    H[..., 1] = dr[..., 1] + k * vs[..., 0]
     H[..., 2] = dr[..., 2]
-    H[..., 3] = -u[..., 0] + k * s[..., 1]
-    H[..., 4] = -u[..., 1] - k * s[..., 0]
+    H[..., 3] = -u[..., 0] - k * s[..., 1]
+    H[..., 4] = -u[..., 1] + k * s[..., 0]
     H[..., 5] = -u[..., 2]
     H[..., 6] = 1.0
     return rate, H

@@ -13,7 +13,7 @@ carrier; RTKLIB's default set with a warning when the file has none), ``T`` Saas
 (:mod:`selfnav.gnss.atmosphere`), both at a first all-satellite fix. The range rate
 ``ρ̇ = −λ D`` gives the velocity and clock drift by weighted least squares on::
 
-    ρ̇ = u·(v^s − v) + c (δṫ − δṫ^s) + (Ω/c)(v^s_y x + y^s v_x − v^s_x y − x^s v_y)        (RTKLIB resdop)
+    ρ̇ = u·(v^s − v) + c (δṫ − δṫ^s) + (Ω/c)(v^s_x y − v^s_y x)       (selfnav.gnss.models (2))
 
 with the same largest-consistent-subset exclusion (:mod:`selfnav.gnss.fde`). Weights: the
 C/N0 model ``σ² = σ0² 10^{(C0 − C/N0)/10}`` (default) or C/N0 with ``1/sin²E``, scaled by the
@@ -362,7 +362,7 @@ def _velocity(res, obs, sat, sat_vel, sat_drift, names, cfg):
         u = d / np.linalg.norm(d, axis=1)[:, None]
         vs = sat_vel[rows]
         pred = np.einsum("ij,ij->i", u, vs) - C_LIGHT * sat_drift[rows] + OMEGA_EARTH / C_LIGHT * (
-            vs[:, 1] * r0[0] - vs[:, 0] * r0[1])
+            vs[:, 0] * r0[1] - vs[:, 1] * r0[0])
         H = np.column_stack([-u, np.ones(len(rows))])   # Sagnac terms in v: < 1e-5 of u
         y = rr[rows] - pred
         s2 = scale.value() if len(scale.buf) >= scale.min_count else scale.value(
