@@ -15,7 +15,7 @@ import numpy as np
 
 from selfnav.earth import ecef_to_enu, enu_rotation, geodetic_to_ecef
 from selfnav.gnss.raw import spp_raw
-from selfnav.io.gnss_raw import read_gnss_raw
+from selfnav.io.raw_readers import read_gnss_raw
 from selfnav.sim.faults import SatelliteFault, fault_at, inject_faults
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data"

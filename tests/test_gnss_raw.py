@@ -7,7 +7,8 @@ from selfnav.earth import enu_rotation, geodetic_to_ecef
 from selfnav.errors import InputError
 from selfnav.gnss.fde import VarianceScale, fde_epoch
 from selfnav.gnss.raw import RawSppConfig, smooth_code, spp_raw
-from selfnav.io.gnss_raw import GALILEO, GPS, detect_format, read_gnss_raw
+from selfnav.io.gnss_raw import GALILEO, GPS
+from selfnav.io.raw_readers import detect_format, read_gnss_raw
 from selfnav.sim.faults import SatelliteFault
 from selfnav.sim.satellites import SatSimConfig, StreetCanyon, simulate_gnss
 

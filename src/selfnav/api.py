@@ -534,8 +534,8 @@ __all__ = ["read_imu", "read_imu_positions", "read_gnss", "read_roads", "read_so
 # ---------------------------------------------------------------- raw GNSS (issue 23)
 def read_gnss_raw(path, nav=None, *, fmt: str = "auto"):
     """Raw GNSS measurements (+ ephemerides) of a RINEX, u-blox UBX, Android GnssLogger,
-    smartLoc or PSINS file: :func:`selfnav.io.gnss_raw.read_gnss_raw`."""
-    from selfnav.io.gnss_raw import read_gnss_raw as _read
+    smartLoc or PSINS file: :func:`selfnav.io.raw_readers.read_gnss_raw`."""
+    from selfnav.io.raw_readers import read_gnss_raw as _read
 
     return _read(path, nav, fmt=fmt)
 
@@ -563,7 +563,8 @@ def spp(gnss_raw, nav=None, *, fmt: str = "auto", elevation_mask_deg: float = 5.
     from dataclasses import replace as _replace
 
     from selfnav.gnss.raw import RawSppConfig, spp_raw
-    from selfnav.io.gnss_raw import LETTER_SYSTEMS, GPS_WEEK_S, RawGnss, read_gnss_raw as _read
+    from selfnav.io.gnss_raw import GPS_WEEK_S, LETTER_SYSTEMS, RawGnss
+    from selfnav.io.raw_readers import read_gnss_raw as _read
 
     raw = gnss_raw if isinstance(gnss_raw, RawGnss) else _read(gnss_raw, nav, fmt=fmt)
     cfg = RawSppConfig()

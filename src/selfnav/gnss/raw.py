@@ -251,6 +251,9 @@ def spp_raw(raw: RawGnss, cfg: RawSppConfig | None = None) -> RawSppResult:
     obs = raw.obs
     if obs.corrected:
         return _spp_corrected(raw, cfg)
+    if len(raw.eph) == 0:
+        raise InputError(raw.source, "no ephemerides: the file carries none; give a RINEX "
+                                     "navigation file (--nav)")
     obs = obs.select(select_signals(obs, cfg.systems))
     if len(obs) == 0:
         raise InputError(raw.source, "no pseudorange of a supported signal (GPS, Galileo, "
