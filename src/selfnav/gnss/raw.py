@@ -120,7 +120,7 @@ def select_signals(obs: GnssObservations, systems) -> np.ndarray:
     return idx[first]
 
 
-def smooth_code(obs: GnssObservations, tau_s: float = 30.0, jump_sigma: float = 5.0,
+def smooth_code(obs: GnssObservations, tau_s: float = 30.0, jump_sigma: float = 4.0,
                 coast_s: float = 120.0):
     """Doppler-aided code smoothing (the Hatch (1982) filter with the integrated Doppler in
     place of the carrier phase), causal, per satellite and signal::
@@ -134,7 +134,8 @@ def smooth_code(obs: GnssObservations, tau_s: float = 30.0, jump_sigma: float = 
 
     **Code faults.** When a pseudorange departs from its prediction by more than
     ``jump_sigma · s`` (``s`` the satellite's running σ of ``ρ − p``, started from the
-    receiver's σ or 5 m), the code is not used and the range coasts on the Doppler
+    receiver's σ or 5 m, updated slowly with the differences clipped at 3 s so that a ramp
+    does not widen its own test), the code is not used and the range coasts on the Doppler
     (``ρ̂_k = p_k``) for up to ``coast_s``: a step, or a ramp faster than the smoother follows,
     on one satellite's code is bridged by its own Doppler; after ``coast_s`` of disagreement
     the code is taken again (restart, ``N = 1``). A gap (over 3 median intervals) or a missing Doppler
@@ -182,7 +183,8 @@ def smooth_code(obs: GnssObservations, tau_s: float = 30.0, jump_sigma: float = 
                     state[keys[i]] = [p, st[1], st[2], obs.t[i], rr[i], since]
                     done.add(i)
                 continue
-            st[2] = 0.98 * st[2] + 0.02 * dd * dd
+            st[2] = 0.995 * st[2] + 0.005 * min(dd * dd, 9.0 * st[2])   # slow, clipped: a
+            # ramp must not teach the test its own growth
             n = min(st[1] + 1.0, nmax)
             pr[i] = pr[i] / n + (1.0 - 1.0 / n) * p
             N[i] = n
