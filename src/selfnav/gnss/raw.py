@@ -135,7 +135,9 @@ def smooth_code(obs: GnssObservations, tau_s: float = 30.0, jump_sigma: float = 
     **Code faults.** When a pseudorange departs from its prediction by more than
     ``jump_sigma · s`` (``s`` the satellite's running σ of ``ρ − p``, started from the
     receiver's σ or 5 m, updated slowly with the differences clipped at 3 s so that a ramp
-    does not widen its own test), the code is not used and the range coasts on the Doppler
+    does not widen its own test), or when the mean of its last ``M = 10`` differences
+    exceeds ``jump_sigma · s / √M`` (a ramp: a few metres of drift against the Doppler,
+    below the single-epoch test), the code is not used and the range coasts on the Doppler
     (``ρ̂_k = p_k``) for up to ``coast_s``: a step, or a ramp faster than the smoother follows,
     on one satellite's code is bridged by its own Doppler; after ``coast_s`` of disagreement
     the code is taken again (restart, ``N = 1``). A gap (over 3 median intervals) or a missing Doppler
@@ -156,6 +158,8 @@ def smooth_code(obs: GnssObservations, tau_s: float = 30.0, jump_sigma: float = 
     order = np.argsort(ep, kind="stable")
     bounds = np.searchsorted(ep[order], np.arange(len(t_ep) + 1))
     state: dict = {}          # key -> [ρ̂, N, s², t, ρ̇, coasting since (t) or None]
+    recent: dict = {}         # key -> the last M code − prediction differences
+    M = 10
     for e in range(len(t_ep)):
         rows = order[bounds[e]:bounds[e + 1]]
         cont, pred, inn = [], [], []
@@ -176,7 +180,11 @@ def smooth_code(obs: GnssObservations, tau_s: float = 30.0, jump_sigma: float = 
             st = state[keys[i]]
             dd = d - delta
             p = p + delta
-            if dd * dd > jump_sigma**2 * st[2]:
+            hist = recent.setdefault(keys[i], [])
+            hist.append(dd)
+            del hist[:-M]
+            drifting = len(hist) == M and (sum(hist) / M) ** 2 > jump_sigma**2 * st[2] / M
+            if dd * dd > jump_sigma**2 * st[2] or drifting:
                 since = st[5] if st[5] is not None else obs.t[i]
                 if obs.t[i] - since < coast_s:        # coast on the Doppler
                     pr[i], N[i], coasting[i] = p, st[1], True
@@ -192,6 +200,7 @@ def smooth_code(obs: GnssObservations, tau_s: float = 30.0, jump_sigma: float = 
             done.add(i)
         for i in rows:
             if i not in done:
+                recent.pop(keys[i], None)
                 st = state.get(keys[i])
                 s2 = st[2] if st is not None else 2.0 * sig0[i] ** 2
                 state[keys[i]] = [pr[i], 1.0, s2, obs.t[i], rr[i], None]
