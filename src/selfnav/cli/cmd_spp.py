@@ -9,8 +9,6 @@ import typer
 from selfnav.cli import options as opt
 from selfnav.cli.common import emit_json
 
-RAW_FORMATS = ("auto", "rinex", "ubx", "android", "smartloc", "psins")
-
 
 def register(app: typer.Typer) -> None:
     @app.command("spp")
@@ -25,7 +23,7 @@ def register(app: typer.Typer) -> None:
             "--nav", help="RINEX 2/3 navigation file with the broadcast ephemerides (and "
                           "Klobuchar parameters); repeat for several.")] = None,
         fmt: Annotated[str, opt.choice_option(
-            "--format", choices=RAW_FORMATS,
+            "--format", choices=opt.RAW_FORMATS,
             help="Format of --gnss-raw; auto: by name and content.")] = "auto",
         elevation_mask_deg: Annotated[float, typer.Option(
             "--elevation-mask-deg", min=0.0, max=90.0,
@@ -34,7 +32,8 @@ def register(app: typer.Typer) -> None:
             "--smoothing-s", min=0.0,
             help="Time constant of the Doppler-aided code smoothing, s (0: off).")] = 30.0,
         systems: Annotated[Optional[str], typer.Option(
-            "--systems", help="Constellations to use, RINEX letters (e.g. GEC); default all "
+            "--systems", metavar="LETTERS",
+            help="Constellations to use, RINEX letters (e.g. GEC); default all "
                               "of G, R, E, C, J.")] = None,
         fde: Annotated[bool, typer.Option(
             "--fde/--no-fde", help="Exclude faulty satellites (largest consistent subset, "
