@@ -25,7 +25,11 @@ consistent subset** (maximum consensus):
    redundancy is left;
 4. re-admission: an excluded satellite whose residual against the kept solution is within
    the test (``|v_j| / √(σ_j² + h_j P h_jᵀ)`` small) and that keeps the subset consistent is
-   taken back (greedy elimination can remove a good satellite).
+   taken back (greedy elimination can remove a good satellite);
+5. ambiguity: where other subsets of the winning size pass too with a solution beyond 3σ of
+   the kept one (two consistent faults among few satellites: which two cannot be told), the
+   position covariance is widened by the largest such separation ``d dᵀ`` — the solution is
+   kept, its σ covers the alternative.
 
 This is the fault-mode enumeration of solution-separation ARAIM (Blanch et al., "Baseline
 advanced RAIM user algorithm and possible improvements", IEEE TAES 51(1), 2015) used for
@@ -64,7 +68,8 @@ class EpochFde:
     """Result of :func:`fde_epoch`: ``used`` (n,) bool, ``dx`` (p,), ``P`` (p, p) =
     ``(Hᵀ W H)⁻¹`` of the used set, ``T``, ``dof``, ``passed``, ``residual`` (n,) against
     ``dx`` (all satellites), ``z`` (n,) normalized residuals (w-test of the used ones,
-    prediction-normalized for the excluded ones), ``subsets`` tested."""
+    prediction-normalized for the excluded ones), ``subsets`` tested. ``P`` includes
+    ``P_ambiguity`` (see :func:`fde_epoch`)."""
 
     used: np.ndarray
     dx: np.ndarray
@@ -75,6 +80,9 @@ class EpochFde:
     residual: np.ndarray
     z: np.ndarray
     subsets: int
+    #: (p, p) added to ``P`` by :func:`fde_epoch`: other subsets of the same size passed
+    #: the test with solutions far from the kept one (the identification is ambiguous)
+    P_ambiguity: np.ndarray | None = None
 
 
 def _threshold(dof, alpha):
@@ -131,6 +139,7 @@ def fde_epoch(H, r, var, *, alpha: float = 1e-3, max_exclusions: int | None = No
     thr = _threshold(dof, alpha)
     best_mask = full[0]
     ok = (T <= thr) | (dof < 1)
+    alternatives = None
     if not ok[0] and kmax > 0:
         found = None
         cand_mask, cand_ratio = full[0], T[0] / thr[0]
@@ -156,10 +165,12 @@ def fde_epoch(H, r, var, *, alpha: float = 1e-3, max_exclusions: int | None = No
                 # one more exclusion only if it lowers T by more than a single-satellite test
                 if Ts[j] + pen * k < best_score and ratio[j] <= 1.0:
                     found, best_score = masks[j], Ts[j] + pen * k
+                    alternatives = dxs[(ratio <= 1.0)]
                     continue
                 break
             if ratio[j] <= 1.0:
                 found, best_score = masks[j], Ts[j] + pen * k
+                alternatives = dxs[(ratio <= 1.0)]
         if found is None:
             # backward elimination from the best subset of the last exhaustive level
             m = cand_mask.copy()
@@ -191,8 +202,20 @@ def fde_epoch(H, r, var, *, alpha: float = 1e-3, max_exclusions: int | None = No
     var = 1.0 / w
     qv = np.where(best_mask, var - q, var + q)
     z = np.where(qv > 1e-9 * var, res / np.sqrt(np.maximum(qv, 1e-300)), np.nan)
+    P_amb = None
+    if alternatives is not None and len(alternatives) > 1:
+        # solution separation among the consistent subsets of the winning size: if another
+        # passes with a solution beyond the kept one's 3σ, the σ must cover it
+        d = alternatives[:, :3] - dx[0, :3]
+        Pi = np.linalg.pinv(P[:3, :3])
+        m = np.einsum("ki,ij,kj->k", d, Pi, d)
+        j = int(np.argmax(m))
+        if m[j] > 9.0:
+            P_amb = np.zeros_like(P)
+            P_amb[:3, :3] = np.outer(d[j], d[j])
+            P = P + P_amb
     return EpochFde(best_mask, dx[0], P, float(T[0]), int(dof[0]),
-                    bool(T[0] <= thr[0] or dof[0] < 1), res, z, tested)
+                    bool(T[0] <= thr[0] or dof[0] < 1), res, z, tested, P_amb)
 
 
 def _readmit(H, r, w, mask, alpha):

@@ -392,6 +392,7 @@ def _solve_subset(t_ep, order, epoch_sorted, slot, mask, use, prp, vp, satp, sys
     s2 = np.ones(E)
     eye = np.eye(n)
     subsets = 0
+    P_amb = np.zeros((E, 3, 3))
     for e in solv:
         u = np.flatnonzero(use[e])
         xe = x[e:e + 1].copy()
@@ -412,6 +413,8 @@ def _solve_subset(t_ep, order, epoch_sorted, slot, mask, use, prp, vp, satp, sys
             if np.linalg.norm(f.dx[:3]) < 10.0:
                 break
         use[e, u[~f.used]] = False
+        if f.P_ambiguity is not None:
+            P_amb[e] = f.P_ambiguity[:3, :3]
         if cfg.adaptive_sigma:
             scale.add(f.z * np.sqrt(s2[e]))
         else:
@@ -435,10 +438,12 @@ def _solve_subset(t_ep, order, epoch_sorted, slot, mask, use, prp, vp, satp, sys
     # a failed test means the σ model is too optimistic there: inflate by the variance factor
     infl = np.where(~passed & (dof > 0), T / np.maximum(dof, 1), 1.0)
     Ninv = Ninv * infl[:, None, None]
+    Ninv[:, :3, :3] += P_amb
     n_excl = use0.sum(1) - use.sum(1)
     return _assemble(t_ep, order, epoch_sorted, slot, use, r, x, Ninv, T, dof, passed, n_excl,
                      sysp, systems, dof >= 0, M,
                      {"exclusion_rounds": 0, "subsets_tested": int(subsets),
+                      "ambiguous_epochs": int(np.any(P_amb != 0, axis=(1, 2)).sum()),
                       "sigma_scale_median": float(np.sqrt(np.median(s2[solv]))) if solv.size
                       else float("nan")}, np.sqrt(s2))
 
