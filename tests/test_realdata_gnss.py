@@ -188,3 +188,18 @@ def test_rinex3_observation_round_trip(android, shared_data, tmp_path):
     same = replace(android, obs=replace(android.obs, pr_sigma=np.full(len(android.obs), np.nan)))
     e0 = h_error_android(api.spp(same))
     assert abs(rms(e1) - rms(e0)) < 0.05
+
+
+def test_ambiguous_consistent_faults_widen_the_sigma(android):
+    """Two satellites of the phone's six ramping 1 m/s in range *and* range rate: no subset
+    test can tell which two; the position goes wrong (tens of metres) but its σ says so."""
+    faults = [SatelliteFault(GPS, p, fault_at(android.obs, 22.0), 60.0, "ramp", 1.0, doppler=True)
+              for p in (24, 6)]
+    f = type(android)(inject_faults(android.obs, faults), android.eph, android.receiver,
+                      android.source)
+    sol = api.spp(f)
+    e = h_error_android(sol)
+    s = sol.columns["sigma_h_m"]
+    bad = e > 10.0
+    assert bad.sum() > 30 and sol.stats["ambiguous_epochs"] > 30
+    assert np.mean(e[bad] < 2.0 * s[bad]) > 0.9
