@@ -10,7 +10,7 @@ from selfnav.cli import main
 from selfnav.cli import options as opt
 
 COMMANDS = ("latitude", "moving", "navigate", "simulate", "evaluate", "match", "allan",
-            "montecarlo", "demo")
+            "montecarlo", "demo", "spp")
 
 
 def test_choice_lists_equal_the_librarys():
@@ -21,6 +21,9 @@ def test_choice_lists_equal_the_librarys():
     assert opt.GNSS_FORMATS == readers.GNSS_FORMATS
     assert opt.DATUMS == datum.DATUMS
     assert opt.GRADES == sensors.GRADE_NAMES
+    from selfnav.io import raw_readers
+
+    assert opt.RAW_FORMATS == raw_readers.RAW_FORMATS
 
 
 def _help(capsys, cmd):

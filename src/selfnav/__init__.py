@@ -45,6 +45,7 @@ _API = {
     "navigate_moving": "selfnav.moving_driver",
     "ImuData": "selfnav.types", "GnssData": "selfnav.types", "Trajectory": "selfnav.types",
     "AttitudeData": "selfnav.types",
+    "spp": "selfnav.api", "read_gnss_raw": "selfnav.api",
 }
 
 __all__ = ["__version__", *_API]

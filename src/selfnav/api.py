@@ -534,3 +534,130 @@ __all__ = ["read_imu", "read_imu_positions", "read_gnss", "read_roads", "read_so
            "Solution", "allan_noise", "latitude_requirements", "latitude_error_budget",
            "evaluate_report", "map_coverage", "check_map_covers", "imu_gaps", "simulate_files",
            "run_montecarlo", "as_trajectory"]
+
+
+# ---------------------------------------------------------------- raw GNSS (issue 23)
+def read_gnss_raw(path, nav=None, *, fmt: str = "auto"):
+    """Raw GNSS measurements (+ ephemerides) of a RINEX, u-blox UBX, Android GnssLogger,
+    smartLoc or PSINS file: :func:`selfnav.io.raw_readers.read_gnss_raw`."""
+    from selfnav.io.raw_readers import read_gnss_raw as _read
+
+    return _read(path, nav, fmt=fmt)
+
+
+def spp(gnss_raw, nav=None, *, fmt: str = "auto", elevation_mask_deg: float = 5.0,
+        smoothing_s: float = 30.0, fde: bool = True, systems=None, alpha: float = 1e-3):
+    """Single-point positions, Doppler velocities and per-epoch satellite exclusions of a raw
+    GNSS record (docs/gnss.md).
+
+    Parameters
+    ----------
+    gnss_raw : path or :class:`selfnav.io.gnss_raw.RawGnss`
+    nav : RINEX navigation file(s) adding ephemerides, optional
+    fmt : raw format (:data:`selfnav.io.gnss_raw.RAW_FORMATS`)
+    elevation_mask_deg, smoothing_s, alpha : see :class:`selfnav.gnss.raw.RawSppConfig`
+    fde : exclude faulty satellites (largest consistent subset); False: all satellites
+    systems : iterable of RINEX letters (``"GREC"``) or system codes; None: all
+
+    Returns
+    -------
+    Solution
+        ``method "spp"``; ``columns`` per epoch (see docs/gnss.md), ``stats`` the summary,
+        ``detail`` the :class:`selfnav.gnss.raw.RawSppResult`.
+    """
+    from dataclasses import replace as _replace
+
+    from selfnav.gnss.raw import RawSppConfig, spp_raw
+    from selfnav.io.gnss_raw import GPS_WEEK_S, LETTER_SYSTEMS, RawGnss
+    from selfnav.io.raw_readers import read_gnss_raw as _read
+
+    raw = gnss_raw if isinstance(gnss_raw, RawGnss) else _read(gnss_raw, nav, fmt=fmt)
+    cfg = RawSppConfig()
+    sp = _replace(cfg.spp, alpha=alpha, raim=bool(fde))
+    kw = {}
+    if systems is not None:
+        codes = []
+        for s in systems:
+            if isinstance(s, str):
+                if s.upper() not in LETTER_SYSTEMS:
+                    raise SelfnavError(f"unknown satellite system '{s}' (G, R, E, C, J)")
+                codes.append(LETTER_SYSTEMS[s.upper()])
+            else:
+                codes.append(int(s))
+        kw["systems"] = tuple(codes)
+    cfg = _replace(cfg, spp=sp, elevation_mask_deg=elevation_mask_deg, smoothing_s=smoothing_s,
+                   **kw)
+    res = spp_raw(raw, cfg)
+    r = res.spp
+    ok = np.isfinite(r.lat)
+    n = int(ok.sum())
+    if n == 0:
+        raise SelfnavError(f"{raw.source}: no epoch has enough satellites for a position")
+    week0 = 0
+    if raw.obs.corrected:             # smartLoc: the file's own time base
+        t, week = r.t[ok], np.zeros(n, int)
+    else:
+        week0 = int(np.floor(r.t[ok][0] / GPS_WEEK_S))
+        t, week = r.t[ok] - week0 * GPS_WEEK_S, np.floor(r.t[ok] / GPS_WEEK_S).astype(int)
+    vel = res.velocity_enu[ok]
+    full_vel = bool(np.all(np.isfinite(vel)))
+    traj = Trajectory(t, r.lat[ok], r.lon[ok], r.h[ok],
+                      vel if full_vel else np.full((n, 3), np.nan),
+                      np.full((n, 3, 3), np.nan), source=f"selfnav spp {raw.source}")
+    sig = r.sigma_enu[ok]
+    cols = {"sigma_h_m": np.hypot(sig[:, 0], sig[:, 1]), "sigma_m": r.sigma_m[ok]}
+    if np.any(np.isfinite(vel)):
+        sv = res.sigma_vel_enu[ok]
+        cols["sigma_vel_mps"] = np.sqrt(0.5 * (sv[:, 0] ** 2 + sv[:, 1] ** 2))
+        cols["clock_drift_mps"] = res.clock_drift[ok]
+    idx = np.flatnonzero(ok)
+    cols.update(
+        gps_week=week, n_sats=r.n_sats[ok], n_used=r.n_used[ok],
+        excluded=np.array([" ".join(res.excluded[i]) or "-" for i in idx], dtype=object),
+        excluded_doppler=np.array([" ".join(res.excluded_doppler[i]) or "-" for i in idx],
+                                  dtype=object),
+        test_stat=r.test_stat[ok], dof=r.dof[ok], passed=r.passed[ok].astype(int),
+        sigma_scale=(r.sigma_scale[ok] if r.sigma_scale is not None else np.ones(n)))
+    stats = {**res.stats, "epochs_out": n, "no_fix": int((~ok).sum()),
+             "median_sigma_h_m": float(np.median(cols["sigma_h_m"])),
+             "receiver_solution": raw.receiver is not None, "source": raw.source,
+             "week0": week0}
+    return Solution(traj, sig, cols, stats, "spp", res)
+
+
+def receiver_solution(raw) -> Solution:
+    """The receiver's own solution of a raw record (u-blox NAV-PVT, Android ``Fix``) as a
+    :class:`Solution` on the same time base as :func:`spp` (GPS seconds of the first week),
+    ``quality`` per row (1 fixed RTK, 2 float, 4 differential, 5 single)."""
+    from selfnav.io.gnss_raw import GPS_WEEK_S
+
+    g = raw.receiver
+    if g is None:
+        raise SelfnavError(f"{raw.source}: the file has no receiver solution (NAV-PVT, Fix)")
+    week0 = int(np.floor(raw.obs.t[0] / GPS_WEEK_S))
+    n = len(g.t)
+    v = g.velocity_n if g.velocity_n is not None else np.full((n, 3), np.nan)
+    traj = Trajectory(g.t - week0 * GPS_WEEK_S, g.lat, g.lon, g.h, v,
+                      np.full((n, 3, 3), np.nan), source=g.source)
+    return Solution(traj, None, {"quality": g.quality, "sigma_m": g.sigma_m}, {}, "receiver")
+
+
+def write_sat_log(path, solution: Solution):
+    """Per satellite and epoch of an :func:`spp` solution: ``t, sat, used, residual_m,
+    elevation_deg, azimuth_deg, iono_m, tropo_m`` (written atomically)."""
+    from selfnav.io.csvio import write_csv
+    from selfnav.io.gnss_raw import GPS_WEEK_S
+
+    res = solution.detail
+    r = res.spp
+    t = res.obs_t - solution.stats.get("week0", 0) * GPS_WEEK_S
+    return write_csv(path, {"t": t, "sat": res.obs_name, "used": r.obs_used.astype(int),
+                            "residual_m": r.obs_residual,
+                            "elevation_deg": np.degrees(res.obs_elevation),
+                            "azimuth_deg": np.degrees(res.obs_azimuth),
+                            "iono_m": res.obs_iono, "tropo_m": res.obs_tropo},
+                     fmt={"t": "%.3f", "residual_m": "%.3f", "elevation_deg": "%.2f",
+                          "azimuth_deg": "%.2f", "iono_m": "%.3f", "tropo_m": "%.3f"})
+
+
+__all__ += ["read_gnss_raw", "spp", "receiver_solution", "write_sat_log"]

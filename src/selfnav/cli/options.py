@@ -22,6 +22,7 @@ DATUMS = ("wgs84", "pz90.11", "pz90", "sk42")
 GRADES = ("navigation", "tactical", "industrial", "consumer")
 SIM_GRADES = (*GRADES, "perfect")
 NAV_GRADES = ("auto", *GRADES)
+RAW_FORMATS = ("auto", "rinex", "ubx", "android", "smartloc", "psins")
 
 
 def checked_choice(choices, normalize: Callable[[str], str] | None = None):

@@ -43,6 +43,7 @@ from scipy.stats import chi2
 
 from selfnav.earth import OMEGA_EARTH, WGS84, ecef_to_geodetic, enu_rotation
 from selfnav.errors import SelfnavError
+from selfnav.gnss.fde import VarianceScale, fde_epoch
 from selfnav.types import GnssData
 
 C_LIGHT = 299_792_458.0
@@ -72,6 +73,15 @@ class SppConfig:
     min_elevation : float
         Satellites below this elevation (rad) are not used.
     max_iter, tol : Gauss–Newton limits (tol in metres).
+    fde : {"w-test", "subset", "none"}
+        Exclusion method when ``raim``: ``"w-test"`` the one-at-a-time Baarda exclusion of the
+        module docstring, ``"subset"`` the largest consistent subset of
+        :func:`selfnav.gnss.fde.fde_epoch` (several faults at once).
+    adaptive_sigma : bool
+        Scale the variances by the causal variance factor of
+        :class:`selfnav.gnss.fde.VarianceScale` (epochs in time order) before testing.
+    max_subsets : int
+        Exhaustive subset search while C(n, k) stays below this (``fde="subset"``).
     """
 
     weighting: str = "variance"
@@ -85,6 +95,9 @@ class SppConfig:
     min_elevation: float = 0.0
     max_iter: int = 12
     tol: float = 1e-4
+    fde: str = "w-test"
+    adaptive_sigma: bool = False
+    max_subsets: int = 1000
 
 
 @dataclass
@@ -116,6 +129,7 @@ class SppResult:
     obs_used: np.ndarray         # (M,) bool
     obs_residual: np.ndarray     # (M,) m, NaN where the epoch has no solution
     stats: dict = field(default_factory=dict)
+    sigma_scale: np.ndarray | None = None   # (E,) σ factor applied to the a-priori σ
 
     @property
     def variance_factor(self) -> np.ndarray:
@@ -289,6 +303,9 @@ def solve_spp(t, pr, var, sat_ecef, system, elevation=None, cn0=None,
         dof = u.sum(1) - 3 - clocks_used(u, idx)
         return T, dof
 
+    if cfg.raim and cfg.fde == "subset":
+        return _solve_subset(t_ep, order, epoch_sorted, slot, mask, use, prp, vp, satp, sysp,
+                             systems, x, cfg, M)
     all_idx = np.arange(E)
     dof = use.sum(1) - 3 - clocks_used(use, all_idx)
     ok_idx = np.flatnonzero(dof >= 0)          # enough satellites for the unknowns
@@ -302,7 +319,7 @@ def solve_spp(t, pr, var, sat_ecef, system, elevation=None, cn0=None,
         (x[ok_idx], r[ok_idx], H[ok_idx], Ninv[ok_idx], _), w0 = solve(x, use, ok_idx)
         T[ok_idx], dof[ok_idx] = statistic(r[ok_idx], w0, use[ok_idx], ok_idx)
     rounds = 0
-    if cfg.raim:
+    if cfg.raim and cfg.fde != "none":
         while rounds < cfg.max_exclusions:
             thr = np.where(dof > 0, chi2.ppf(1.0 - cfg.alpha, np.maximum(dof, 1)), np.inf)
             fail = np.flatnonzero((T > thr) & (dof >= 2))
@@ -355,6 +372,110 @@ def solve_spp(t, pr, var, sat_ecef, system, elevation=None, cn0=None,
              "exclusion_rounds": rounds}
     return SppResult(t_ep, lat, lon, h, pos, clock, systems, sig, sig_m, n_sats, n_used, n_excl,
                      T, dof, passed, obs_epoch, obs_used, obs_res, stats)
+
+
+def _solve_subset(t_ep, order, epoch_sorted, slot, mask, use, prp, vp, satp, sysp, systems, x,
+                  cfg, M):
+    """``fde="subset"``: epochs in time order, largest consistent subset per epoch
+    (:func:`selfnav.gnss.fde.fde_epoch`), variances scaled by the causal variance factor."""
+    E, S = use.shape
+    K = len(systems)
+    n = 3 + K
+    use0 = use.copy()
+    dof0 = use.sum(1) - 3 - np.any((sysp[..., None] == np.arange(K)) & use[..., None], 1).sum(1)
+    solv = np.flatnonzero(dof0 >= 0)
+    if solv.size:     # all-satellite solution: the linearization point of every epoch
+        w = np.divide(1.0, vp[solv], out=np.zeros_like(vp[solv]), where=use[solv])
+        x[solv] = _wls(x[solv], prp[solv], w, satp[solv], sysp[solv], K, cfg.sagnac,
+                       cfg.max_iter, cfg.tol)[0]
+    scale = VarianceScale()
+    s2 = np.ones(E)
+    eye = np.eye(n)
+    subsets = 0
+    P_amb = np.zeros((E, 3, 3))
+    for e in solv:
+        u = np.flatnonzero(use[e])
+        xe = x[e:e + 1].copy()
+        s2[e] = scale.value()
+        for _ in range(3):
+            r, H, _, _, _ = _normal_equations(xe, prp[e:e + 1], np.ones((1, S)), satp[e:e + 1],
+                                              sysp[e:e + 1], K, cfg.sagnac, eye)
+            if cfg.adaptive_sigma and len(scale.buf) < scale.min_count:
+                # the epoch's own all-satellite residuals start the factor
+                f0 = fde_epoch(H[0, u], r[0, u], vp[e, u], alpha=cfg.alpha, max_exclusions=0)
+                s2[e] = scale.value(f0.z)
+            ve = vp[e, u] * (s2[e] if cfg.adaptive_sigma else 1.0)
+            f = fde_epoch(H[0, u], r[0, u], ve, alpha=cfg.alpha,
+                          max_exclusions=min(cfg.max_exclusions, len(u) // 2),
+                          max_subsets=cfg.max_subsets)
+            subsets += f.subsets
+            xe[0] += f.dx
+            if np.linalg.norm(f.dx[:3]) < 10.0:
+                break
+        use[e, u[~f.used]] = False
+        if f.P_ambiguity is not None:
+            P_amb[e] = f.P_ambiguity[:3, :3]
+        if cfg.adaptive_sigma:
+            scale.add(f.z * np.sqrt(s2[e]))
+        else:
+            s2[e] = 1.0
+    # final Gauss–Newton of the kept subsets, with the scaled variances
+    vs = vp * s2[:, None]
+    r = np.zeros(use.shape)
+    Ninv = np.full((E, n, n), np.nan)
+    T = np.full(E, np.nan)
+    dof = np.full(E, -1)
+    if solv.size:
+        w = np.divide(1.0, vs[solv], out=np.zeros_like(vs[solv]), where=use[solv])
+        xs, rs, _, Ns, _ = _wls(x[solv], prp[solv], w, satp[solv], sysp[solv], K, cfg.sagnac,
+                                cfg.max_iter, cfg.tol)
+        x[solv], r[solv], Ninv[solv] = xs, rs, Ns
+        T[solv] = np.sum(w * rs * rs, axis=1)
+        cu = np.any((sysp[solv][..., None] == np.arange(K)) & use[solv][..., None], 1).sum(1)
+        dof[solv] = use[solv].sum(1) - 3 - cu
+    thr = np.where(dof > 0, chi2.ppf(1.0 - cfg.alpha, np.maximum(dof, 1)), np.inf)
+    passed = T <= thr
+    # a failed test means the σ model is too optimistic there: inflate by the variance factor
+    infl = np.where(~passed & (dof > 0), T / np.maximum(dof, 1), 1.0)
+    Ninv = Ninv * infl[:, None, None]
+    Ninv[:, :3, :3] += P_amb
+    n_excl = use0.sum(1) - use.sum(1)
+    return _assemble(t_ep, order, epoch_sorted, slot, use, r, x, Ninv, T, dof, passed, n_excl,
+                     sysp, systems, dof >= 0, M,
+                     {"exclusion_rounds": 0, "subsets_tested": int(subsets),
+                      "ambiguous_epochs": int(np.any(P_amb != 0, axis=(1, 2)).sum()),
+                      "sigma_scale_median": float(np.sqrt(np.median(s2[solv]))) if solv.size
+                      else float("nan")}, np.sqrt(s2))
+
+
+def _assemble(t_ep, order, epoch_sorted, slot, use, r, x, Ninv, T, dof, passed, n_excl, sysp,
+              systems, solvable, M, extra, sigma_scale=None):
+    """SppResult from the padded per-epoch arrays (shared by both exclusion methods)."""
+    K = len(systems)
+    n_used = use.sum(1)
+    n_sats = n_used + n_excl
+    with np.errstate(invalid="ignore"):
+        solvable = solvable & (np.abs(np.linalg.norm(x[:, :3], axis=1) - WGS84.a) < 1e5)
+    pos = np.where(solvable[:, None], x[:, :3], np.nan)
+    lat, lon, h = ecef_to_geodetic(pos)
+    Cen = enu_rotation(np.atleast_1d(lat), np.atleast_1d(lon))
+    P_enu = np.einsum("eij,ejk,elk->eil", Cen, Ninv[:, :3, :3], Cen)
+    sig = np.sqrt(np.maximum(np.diagonal(P_enu, axis1=1, axis2=2), 0.0))
+    sig[~solvable] = np.nan
+    sig_m = np.sqrt(0.5 * (sig[:, 0] ** 2 + sig[:, 1] ** 2))
+    present = np.any((sysp[..., None] == np.arange(K)) & use[..., None], axis=1)
+    clock = np.where(solvable[:, None] & present, x[:, 3:], np.nan)
+    obs_epoch = np.empty(M, int)
+    obs_epoch[order] = epoch_sorted
+    obs_used = np.empty(M, bool)
+    obs_used[order] = use[epoch_sorted, slot]
+    obs_res = np.empty(M)
+    obs_res[order] = np.where(solvable[epoch_sorted], r[epoch_sorted, slot], np.nan)
+    stats = {"epochs": len(t_ep), "solved": int(solvable.sum()), "excluded": int(n_excl.sum()),
+             "epochs_with_exclusion": int((n_excl > 0).sum()),
+             "passed": int(passed[solvable].sum()), **extra}
+    return SppResult(t_ep, lat, lon, h, pos, clock, systems, sig, sig_m, n_sats, n_used, n_excl,
+                     T, dof, passed, obs_epoch, obs_used, obs_res, stats, sigma_scale)
 
 
 def spp_from_pseudoranges(prs, cfg: SppConfig | None = None) -> SppResult:

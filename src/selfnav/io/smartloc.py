@@ -215,3 +215,17 @@ def find_smartloc_files(folder):
         raise InputError(folder, f"expected one '*_Input.txt' and one '*_GT.txt', found "
                                  f"{len(inp)} and {len(gt)}")
     return inp[0], gt[0]
+
+
+def read_smartloc_raw(path):
+    """A smartLoc input file as :class:`selfnav.io.gnss_raw.RawGnss`: the pseudoranges are
+    already corrected (satellite clock, atmosphere) and carry satellite positions, elevation,
+    variance and C/N0, so no ephemeris is needed (``obs.corrected``); the time is the file's."""
+    from selfnav.io.gnss_raw import Ephemerides, GnssObservations, RawGnss
+
+    prs, _ = read_smartloc_input(path)
+    sig = np.where(prs.system == 4, "1C", "1C").astype(object)
+    obs = GnssObservations.build(prs.t, prs.system, prs.sat_id, sig, pseudorange=prs.pr,
+                                 cn0=prs.cn0, source=str(path), sat_ecef=prs.sat_ecef,
+                                 corrected=True, elevation=prs.elevation, variance=prs.var)
+    return RawGnss(obs, Ephemerides.empty(), None, str(path))

@@ -1,0 +1,75 @@
+"""Per-satellite faults injected into raw measurements (simulated or real): steps and ramps on
+the pseudorange, optionally with the matching Doppler (a fault consistent in range and range
+rate, as a spoofer or a slowly moving reflection would make it). Used to test the exclusion of
+:mod:`selfnav.gnss.fde` with known truth; what is injected is returned for the record.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from selfnav.io.gnss_raw import GnssObservations
+
+C_LIGHT = 299_792_458.0
+
+
+@dataclass
+class SatelliteFault:
+    """One fault on one satellite (every signal of it).
+
+    Attributes
+    ----------
+    system, prn : the satellite
+    t_start : s, GPS time the fault begins (see :func:`fault_at`)
+    duration : s, how long it lasts (``inf``: to the end); after it the range is clean again
+    kind : ``"step"`` (``size`` m from ``t_start``) or ``"ramp"`` (``size`` m/s growing from 0)
+    size : m or m/s
+    doppler : bool, also shift the Doppler by the ramp's rate (a range-rate-consistent fault)
+    hold : bool, a ramp that stops growing at the end of ``duration`` and stays (instead of
+        vanishing)
+    """
+
+    system: int
+    prn: int
+    t_start: float
+    duration: float
+    kind: str
+    size: float
+    doppler: bool = False
+    hold: bool = False
+
+    def bias(self, t):
+        """Range bias (m) and range-rate bias (m/s) at times ``t``."""
+        t = np.asarray(t, float)
+        dt = t - self.t_start
+        on = (dt >= 0) & (dt <= self.duration)
+        if self.kind == "step":
+            b = np.where(on, self.size, 0.0)
+            return b, np.zeros_like(b)
+        if self.kind != "ramp":
+            raise ValueError(f"fault kind '{self.kind}' (step, ramp)")
+        b = np.where(on, self.size * dt, 0.0)
+        rate = np.where(on, self.size, 0.0)
+        if self.hold:
+            after = dt > self.duration
+            b = np.where(after, self.size * self.duration, b)
+        return b, rate
+
+
+def fault_at(obs: GnssObservations, t_rel: float) -> float:
+    """GPS time ``t_rel`` seconds after the first epoch of ``obs``."""
+    return float(obs.t[0]) + t_rel
+
+
+def inject_faults(obs: GnssObservations, faults) -> GnssObservations:
+    """A copy of ``obs`` with the faults added to the pseudoranges (and Dopplers where asked:
+    ``D −= ḃ / λ``)."""
+    out = replace(obs, pseudorange=obs.pseudorange.copy(), doppler=obs.doppler.copy())
+    for f in faults:
+        m = (obs.system == f.system) & (obs.prn == f.prn)
+        b, rate = f.bias(obs.t[m])
+        out.pseudorange[m] += b
+        if f.doppler:
+            out.doppler[m] -= rate * obs.frequency[m] / C_LIGHT
+    return out
