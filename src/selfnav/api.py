@@ -492,15 +492,23 @@ def imu_gaps(imu: ImuData, min_missing: int = 1) -> list:
 
 
 def simulate_files(spec, out_dir, *, seed: int = 0, grade: str | None = None,
-                   duration: float | None = None, dt: float | None = None, progress=None):
+                   duration: float | None = None, dt: float | None = None, progress=None,
+                   start: str | None = None, imu_axes=None, imu_mount=None):
     """Simulate a scenario (:func:`selfnav.sim.scenarios.simulate`) and write its files
-    into the folder ``out_dir`` as one set; returns ``(simulation, paths)``."""
+    into the folder ``out_dir`` as one set; returns ``(simulation, paths)``. ``start``:
+    ``rest``/``moving`` for the platforms; ``imu_axes``/``imu_mount``: the IMU written in
+    that axes convention and mounting (:func:`selfnav.sim.scenarios.write_simulation`)."""
     from selfnav.sim.scenarios import simulate, write_simulation
 
-    sim = simulate(spec, seed=seed, grade=grade, duration=duration, dt=dt, progress=progress)
+    if imu_axes is not None or imu_mount is not None:      # a bad spec fails before the work
+        from selfnav.axes import imu_frame
+
+        imu_frame(imu_axes, imu_mount)
+    sim = simulate(spec, seed=seed, grade=grade, duration=duration, dt=dt, start=start,
+                   progress=progress)
     if progress is not None:
         progress("writing")
-    return sim, write_simulation(sim, out_dir)
+    return sim, write_simulation(sim, out_dir, imu_axes=imu_axes, imu_mount=imu_mount)
 
 
 def run_montecarlo(scenario: str, runs: int, *, out=None, **kw):

@@ -522,7 +522,8 @@ class ForwardAxis:
         Gaussian probability that the chosen axis is the nearest to forward
         (``Φ((45° − |yaw|)/σ)``); 0 without enough acceleration or turning to see.
     along_gain, lateral_gain : float
-        Fitted scale of the along-track and lateral accelerations (≈ 1 when consistent).
+        Length of the fitted forward and right vectors (≈ 1 when the specific force and the
+        GNSS accelerations agree in scale).
     handed : int
         +1 when the lateral fit says right × forward = up (a right-handed, correctly signed
         triad), −1 when it says the opposite, 0 when there was no turning to tell.
@@ -556,7 +557,7 @@ class ForwardAxis:
 
 def gnss_velocity_n(gnss: GnssData) -> tuple[np.ndarray, np.ndarray]:
     """ENU velocity of a GNSS record: its own where given, else central differences of the
-    positions (at the fix times; the ends one-sided). Returns ``(t, velocity_n)``."""
+    positions over ±1 s (at the fix times; the ends one-sided). Returns ``(t, velocity_n)``."""
     t = np.asarray(gnss.t, dtype=float)
     if gnss.velocity_n is not None and np.all(np.isfinite(gnss.velocity_n[:, :2])):
         v = np.array(gnss.velocity_n, dtype=float)
@@ -566,7 +567,13 @@ def gnss_velocity_n(gnss: GnssData) -> tuple[np.ndarray, np.ndarray]:
     lon = np.unwrap(gnss.lon)
     p = np.column_stack([(lon - lon[0]) * r_lam * np.cos(gnss.lat), (gnss.lat - gnss.lat[0]) * r_phi,
                          gnss.h - gnss.h[0]])
-    v = np.column_stack([np.gradient(p[:, k], t) for k in range(3)])
+    # central differences over ±1 s (at least one fix each side): the noise of a difference
+    # of positions falls with its span
+    m = max(1, int(round(1.0 / max(float(np.median(np.diff(t))), 1e-6)))) if len(t) > 2 else 1
+    i = np.arange(len(t))
+    a, b = np.clip(i - m, 0, len(t) - 1), np.clip(i + m, 0, len(t) - 1)
+    span = np.where(t[b] > t[a], t[b] - t[a], np.nan)
+    v = (p[b] - p[a]) / span[:, None]
     return t, v
 
 
@@ -581,7 +588,7 @@ def _interval_means(t_imu, x, t0, t1):
 
 
 def detect_forward_axis(imu: ImuData, gnss: GnssData, *, up: UpAxis | None = None,
-                        min_speed: float = 1.0, span_s: float = 1.0) -> ForwardAxis:
+                        min_speed: float = 1.0, span_s: float | None = None) -> ForwardAxis:
     """The forward axis of a sensor on a vehicle, from its horizontal specific force against the
     acceleration of the GNSS velocity.
 
@@ -592,7 +599,9 @@ def detect_forward_axis(imu: ImuData, gnss: GnssData, *, up: UpAxis | None = Non
     along the right direction ``R``, and a constant ``c`` (accelerometer bias and a tilt of the
     mounting). Both are averaged over ``span_s`` around each GNSS epoch on both sides (the IMU
     rows by their interval means), and ``F``, ``R``, ``c`` are fitted by least squares over the
-    epochs faster than ``min_speed``. The forward axis is the sensor axis nearest to ``F``; the
+    epochs faster than ``min_speed`` — as a *reverse* regression, ``a_along = F·(f_h − c)``
+    and ``a_lat = R·(f_h − c)``, so that the noise of the differenced GNSS velocity sits in the
+    responses and does not shrink the fit. The forward axis is the sensor axis nearest to ``F``; the
     fine yaw mounting angle is the angle between them, its σ from the fit's covariance with
     the residual variance.
 
@@ -605,7 +614,8 @@ def detect_forward_axis(imu: ImuData, gnss: GnssData, *, up: UpAxis | None = Non
     up : UpAxis, optional
         Default: :func:`detect_up_axis` of the IMU rows that overlap the GNSS span.
     min_speed : m/s
-    span_s : s, averaging window (≥ 2 GNSS intervals)
+    span_s : s, averaging window (≥ 2 GNSS intervals); default 1 s with the receiver's
+        velocity, 4 s with a velocity differenced from positions (twice differenced noise)
 
     Returns
     -------
@@ -613,6 +623,8 @@ def detect_forward_axis(imu: ImuData, gnss: GnssData, *, up: UpAxis | None = Non
     """
     t_imu = np.asarray(imu.t, dtype=float)
     tg, vg = gnss_velocity_n(gnss)
+    if span_s is None:
+        span_s = 1.0 if gnss.velocity_n is not None else 4.0
     keep = (tg >= t_imu[0]) & (tg <= t_imu[-1])
     tg, vg = tg[keep], vg[keep]
     if up is None:
@@ -654,30 +666,41 @@ def detect_forward_axis(imu: ImuData, gnss: GnssData, *, up: UpAxis | None = Non
     e1 /= np.linalg.norm(e1)
     e2 = np.cross(u, e1)
     B = np.column_stack([e1, e2])
-    y = f_mean[ok] @ B                                  # (M, 2)
-    X = np.column_stack([a_al[ok], a_lat[ok], np.ones(int(ok.sum()))])
+    # reverse regression (the GNSS accelerations, the noisy side, as the responses):
+    # a_along = F·(f_p − c), a_lat = R·(f_p − c), unbiased however noisy the GNSS
+    fp = f_mean[ok] @ B                                 # (M, 2) in the plane
+    X = np.column_stack([fp, np.ones(len(fp))])
+    Y = np.column_stack([a_al[ok], a_lat[ok]])
     XtX = X.T @ X
     try:
         XtX_inv = np.linalg.inv(XtX)
     except np.linalg.LinAlgError:
         return replace(empty, turn_correlation=corr, epochs=int(ok.sum()))
-    coef = XtX_inv @ X.T @ y                            # rows: F, R, c (each in the plane)
-    res = y - X @ coef
-    dof = max(len(y) - 3, 1)
-    s2 = float(np.sum(res ** 2) / (2 * dof))
-    Fp, Rp = coef[0], coef[1]
+    coef = XtX_inv @ X.T @ Y                            # columns: along, lateral
+    res = Y - X @ coef
+    dof = max(len(Y) - 3, 1)
+    s2 = np.sum(res ** 2, axis=0) / dof                 # per response
+    # each epoch's span overlaps its 2k neighbours': the residuals are correlated over 2k
+    # epochs, so the least-squares covariance is inflated by 2k (fewer independent epochs)
+    infl2 = 2.0 * k
+    Fp, Rp = coef[:2, 0], coef[:2, 1]
     gain_f = float(np.linalg.norm(Fp))
     gain_r = float(np.linalg.norm(Rp))
     if not gain_f > 0:
         return replace(empty, turn_correlation=corr, epochs=int(ok.sum()))
-    F = B @ Fp / gain_f
-    # σ of the direction of F: perpendicular component's σ over |F|
-    sig_perp = math.sqrt(s2 * XtX_inv[0, 0]) / gain_f
-    sig_r = math.sqrt(s2 * XtX_inv[1, 1])
+    cov_f = infl2 * s2[0] * XtX_inv[:2, :2]
+    cov_r = infl2 * s2[1] * XtX_inv[:2, :2]
+    nf = Fp / gain_f
+    perp = np.array([-nf[1], nf[0]])
+    sig_perp = math.sqrt(float(perp @ cov_f @ perp)) / gain_f
+    sig_gain = math.sqrt(float(nf @ cov_f @ nf))
+    F = B @ nf
     handed = 0
-    if gain_r > 3.0 * sig_r:
-        R3 = B @ Rp
-        handed = 1 if float(np.cross(R3, F) @ u) > 0 else -1
+    if gain_r > 0:
+        nr = Rp / gain_r
+        if gain_r > 3.0 * math.sqrt(float(nr @ cov_r @ nr)):
+            R3 = B @ nr
+            handed = 1 if float(np.cross(R3, F) @ u) > 0 else -1
     # nearest sensor axis to F among those perpendicular to up
     cand = [j for j in range(3) if j != up.index]
     best = max(cand, key=lambda j: abs(F[j]))
@@ -689,7 +712,7 @@ def detect_forward_axis(imu: ImuData, gnss: GnssData, *, up: UpAxis | None = Non
     # yaw: from the vehicle's forward F to the IMU axis, clockwise seen from above (about −u)
     yaw = float(math.atan2(-(np.cross(F, a_vec) @ u), float(F @ a_vec)))
     conf = _phi((math.pi / 4 - abs(yaw)) / max(sig_perp, 1e-12))
-    if gain_f < 3.0 * math.sqrt(s2 * XtX_inv[0, 0]):
+    if gain_f < 3.0 * sig_gain:
         conf = 0.0                                      # no along-track acceleration to see
     return ForwardAxis(_axis_label(best, sgn), best, sgn, F, yaw, float(sig_perp), float(conf),
                        gain_f, gain_r, handed, corr, int(ok.sum()))

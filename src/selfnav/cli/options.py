@@ -83,7 +83,7 @@ ImuFormatOld = Annotated[Optional[str], choice_option(
     "--format", choices=IMU_FORMATS, help="Same as --imu-format.", hidden=True)]
 
 
-def _check_axes(value):
+def check_axes(value):
     if value is None:
         return None
     from selfnav.axes import AxesError, imu_frame
@@ -95,7 +95,7 @@ def _check_axes(value):
     return value.strip()
 
 
-def _check_mount(value):
+def check_mount(value):
     if value is None:
         return None
     from selfnav.axes import AxesError, parse_mount
@@ -107,13 +107,13 @@ def _check_mount(value):
 
 
 ImuAxes = Annotated[Optional[str], typer.Option(
-    "--imu-axes", metavar="AXES", callback=_check_axes,
+    "--imu-axes", metavar="AXES", callback=check_axes,
     help="What the IMU file's x, y, z point to: three letters of R L F B U D (right, left, "
          "forward, back, up, down; NED reads as FRD), e.g. FRD, RFU, FLU, or x=-F,y=R,z=U; a "
          "preset (" + ", ".join(AXES_PRESETS) + "); or detect (left as the file has them, the "
          "navigator detects). Default: the format's documented axes (docs/readers.md).")]
 ImuMount = Annotated[Optional[str], typer.Option(
-    "--imu-mount", metavar="R,P,Y", callback=_check_mount,
+    "--imu-mount", metavar="R,P,Y", callback=check_mount,
     help="Roll, pitch, yaw of the IMU on the vehicle, deg (DESIGN §2 conventions: yaw "
          "clockwise from above, pitch nose-up, roll right side down), applied after "
          "--imu-axes; overrides a preset's.")]

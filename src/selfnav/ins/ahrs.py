@@ -105,8 +105,9 @@ def find_still(t, omega_b, f_b, *, window_s: float = 0.25, factor: float = 2.5,
     over the axes) of the rates and of the specific force is measured. The floor is the
     median scatter of the quietest windows (the 5 %, at least 3); a window is still when both
     its scatters are within ``factor`` × the floor (and the ceilings), its mean rate agrees with
-    the median mean rate of the still windows (a slow steady turn is not rest: within
-    ``factor`` × the floor scatter over √n plus 1 % of the rate) and its mean |f| with theirs.
+    the median mean rate of the still windows (a steady turn is not rest: within ``factor`` ×
+    the floor scatter plus 1 % of the rate; a trembling hand's window means scatter as its
+    samples do) and its mean |f| with theirs.
     Gyro and accelerometer *biases* never enter: only variation and agreement do (and a mean
     rate beyond ``max_bias``, more than any gyro bias, is a turn).
 
@@ -144,8 +145,9 @@ def find_still(t, omega_b, f_b, *, window_s: float = 0.25, factor: float = 2.5,
         mf = np.linalg.norm(F.mean(axis=1), axis=1)
         ref_w = np.median(mw[ok], axis=0)
         ref_f = float(np.median(mf[ok]))
-        tol_w = factor * max(floor_w, 1e-12) / math.sqrt(k) * 3.0 + 0.01 * np.linalg.norm(ref_w)
-        tol_f = factor * max(floor_a, 1e-12) / math.sqrt(k) * 3.0 + 0.005 * ref_f
+        # a hand holding the unit still trembles: its window means scatter like its samples
+        tol_w = factor * max(floor_w, 1e-12) + 0.01 * np.linalg.norm(ref_w)
+        tol_f = factor * max(floor_a, 1e-12) + 0.005 * ref_f
         ok &= np.linalg.norm(mw - ref_w, axis=1) <= tol_w
         ok &= np.abs(mf - ref_f) <= tol_f
     mask[:nw * k] = np.repeat(ok, k)
@@ -260,6 +262,10 @@ def declination_at(lat: float, lon: float, h: float = 0.0, date=None) -> tuple[f
 MAG_FLOOR_DEG = 2.0
 #: σ of IGRF's declination against the local field, deg (crustal anomalies; IGRF's own).
 IGRF_DECLINATION_SIGMA_DEG = 0.5
+#: Correlation time given to the gyro scale/misalignment errors' attitude drift, s.
+SCALE_CORRELATION_S = 1.0
+#: Memory of the motion level the accelerometer updates allow for, s.
+MOTION_TAU_S = 2.0
 #: White noise of one magnetometer heading update, deg (the constant part is a state).
 MAG_WHITE_DEG = 0.5
 #: Correlation time of the field's azimuth error, s.
@@ -330,6 +336,8 @@ class AhrsConfig:
     window_s, min_still_s, max_wait_s : start: stillness windows, the shortest rest that
         levels, the longest wait for one before starting in motion
     moving_tilt_sigma : rad, tilt σ of a start in motion
+    gyro_scale_sigma : scale-factor and misalignment σ of the gyros (grade's): a turn of θ
+        leaves ``σ θ`` of attitude error, modelled as process noise ``(σ |ω|)² · 1 s`` per s
     estimate_accel_bias : bool
         False (default): the accelerometer bias is a *considered* state (Schmidt–Kalman): its
         uncertainty is in every covariance (the tilt σ never falls below what the bias
@@ -358,6 +366,7 @@ class AhrsConfig:
     max_wait_s: float = 5.0
     moving_tilt_sigma: float = math.radians(10.0)
     estimate_accel_bias: bool = False
+    gyro_scale_sigma: float | None = None
 
     def resolved(self) -> "AhrsConfig":
         """A copy with every ``None`` filled from the grade."""
@@ -381,7 +390,13 @@ class AhrsConfig:
         if out.accel_noise is None:
             out.accel_noise = float(np.max(np.atleast_1d(ac.white)))
         if out.accel_bias_sigma is None:
-            out.accel_bias_sigma = float(np.max(np.atleast_1d(ac.bias)))
+            # the bias and the cross-axis misalignment of gravity: both tilt a level unit
+            out.accel_bias_sigma = math.hypot(float(np.max(np.atleast_1d(ac.bias))),
+                                              float(np.max(np.atleast_1d(ac.misalignment)))
+                                              * G0)
+        if out.gyro_scale_sigma is None:
+            out.gyro_scale_sigma = math.hypot(float(np.max(np.atleast_1d(gy.scale_factor))),
+                                              float(np.max(np.atleast_1d(gy.misalignment))))
         if out.accel_bias_rw is None:
             out.accel_bias_rw = max(rw(ac), 1e-6)
         return out
@@ -466,6 +481,8 @@ class Ahrs:
         self._mag_ref = None
         self._om_ie_n = None if self.cfg.lat is None else earth_rate_n(self.cfg.lat)
         self._mag_floor = self.cfg.mag_floor_deg
+        self._zmean = None
+        self._zvar = 0.0
 
     # ------------------------------------------------------------------ start
     def _try_start(self, final: bool = False) -> bool:
@@ -627,7 +644,8 @@ class Ahrs:
         F = np.eye(self.N)
         F[0:3, 3:6] = -C * dt
         Q = np.zeros((self.N, self.N))
-        Q[0:3, 0:3] = np.eye(3) * cfg.gyro_noise ** 2 * dt
+        Q[0:3, 0:3] = np.eye(3) * (cfg.gyro_noise ** 2 + (cfg.gyro_scale_sigma * float(
+            np.linalg.norm(wc))) ** 2 * SCALE_CORRELATION_S) * dt
         Q[3:6, 3:6] = np.eye(3) * cfg.gyro_bias_rw ** 2 * dt
         Q[6:9, 6:9] = np.eye(3) * cfg.accel_bias_rw ** 2 * dt
         Q[9, 9] = (math.radians(self._mag_floor) ** 2 * 2.0 / MAG_ERROR_TAU_S) * dt
@@ -693,7 +711,17 @@ class Ahrs:
         H[1, 0] = g
         H[:, 6:9] = Cm[:2]
         dev = abs(a["fnorm"] / n - g)
-        s_motion2 = (self.cfg.accel_motion_sigma ** 2 + float(var[:2].mean()) + (2.0 * dev) ** 2)
+        # the unit's own accelerations: their scatter from update to update over the last
+        # MOTION_TAU_S (a walker's steps, a hand's shake), not only within one interval; a
+        # constant tilt error shifts the mean, not the scatter
+        w = min(1.0, (n * (self._last_dt or 0.01)) / MOTION_TAU_S)
+        if self._zmean is None:
+            self._zmean, self._zvar = z.copy(), 0.0
+        d = z - self._zmean
+        self._zmean = self._zmean + w * d
+        self._zvar = (1.0 - w) * (self._zvar + w * float(d @ d) / 2.0)
+        s_motion2 = (self.cfg.accel_motion_sigma ** 2 + float(var[:2].mean()) + (2.0 * dev) ** 2
+                     + self._zvar)
         s_noise2 = self.cfg.accel_noise ** 2 / max(n * (self._last_dt or 0.01), 1e-9)
         R = np.eye(2) * (s_motion2 + s_noise2)
         self._kalman(H, z, R)

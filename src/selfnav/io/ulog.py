@@ -68,6 +68,9 @@ def _dataset(u, names, path, required=True):
             return min(ds, key=lambda d: d.multi_id)
     if required:
         have = sorted({d.name for d in u.data_list})
+        if not have and not getattr(u, "message_formats", None):
+            raise InputError(path, "is a ULog file with no logged messages (empty, or cut "
+                             "short before the first data)")
         raise InputError(path, f"has no {' or '.join(names)} messages (its topics: "
                          f"{', '.join(have[:12])}{' ...' if len(have) > 12 else ''})")
     return None
