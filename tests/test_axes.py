@@ -8,6 +8,7 @@ from scipy.spatial.transform import Rotation
 
 from selfnav import attitude as att
 from selfnav import axes as A
+from selfnav import axes_detect as D
 from selfnav.io.readers import read_imu
 from selfnav.sim.scenarios import simulate, write_simulation
 
@@ -126,13 +127,13 @@ def test_detected_axes_match_without_imu_axes(drive, spec, yaw_deg):
     fr = A.imu_frame(spec, (0.0, 0.0, yaw_deg))
     raw = A.from_vehicle(drive.imu, fr)
     first = raw.t < raw.t[0] + 30.0
-    up = A.detect_up_axis(raw.f_ib_b[first])
+    up = D.detect_up_axis(raw.f_ib_b[first])
     assert up.confidence > 0.999 and up.tilt_rad < math.radians(3)
-    fw = A.detect_forward_axis(raw, drive.gnss.as_gnss(velocity=True), up=up)
+    fw = D.detect_forward_axis(raw, drive.gnss.as_gnss(velocity=True), up=up)
     assert fw.confidence > 0.999 and fw.handed == 1 and fw.turn_correlation > 0.9
     assert abs(fw.yaw_mount_rad - math.radians(yaw_deg)) < 3 * fw.sigma_yaw_rad
     assert fw.sigma_yaw_rad < math.radians(2.0)
-    det = A.frame_from_detection(up, fw)
+    det = D.frame_from_detection(up, fw)
     assert det.axes == fr.axes
     # read with the detected frame, the drive is the vehicle's again (to the yaw's σ)
     back = A.to_vehicle(raw, det)
@@ -141,19 +142,19 @@ def test_detected_axes_match_without_imu_axes(drive, spec, yaw_deg):
     assert np.linalg.norm(err) < 3 * fw.sigma_yaw_rad
     assert np.abs(back.f_ib_b.mean(axis=0)[2] - drive.imu.f_ib_b.mean(axis=0)[2]) < 0.01
     # what was given and what was detected: one line when they disagree, None when not
-    assert A.compare_frames(fr, det, up=up, forward=fw) is None
+    assert D.compare_frames(fr, det, up=up, forward=fw) is None
     wrong = A.imu_frame("RFU" if spec != "RFU" else "FRD")
-    msg = A.compare_frames(wrong, det, up=up, forward=fw)
+    msg = D.compare_frames(wrong, det, up=up, forward=fw)
     assert msg and "disagrees with the data" in msg and "\n" not in msg
 
 
 def test_forward_from_positions_only_is_honest(drive):
     """Without the receiver's velocity (10 m σ at 1 Hz) the forward axis is not claimed."""
     noisy = simulate({"scenario": {"kind": "car", "duration": 240.0}}, seed=2)
-    fw = A.detect_forward_axis(noisy.imu, noisy.gnss.as_gnss())
+    fw = D.detect_forward_axis(noisy.imu, noisy.gnss.as_gnss())
     assert fw.confidence < 0.9
     # 1 m at 5 Hz positions: the axis is right and its σ says how well it is known
-    fw = A.detect_forward_axis(drive.imu, drive.gnss.as_gnss())
+    fw = D.detect_forward_axis(drive.imu, drive.gnss.as_gnss())
     assert fw.axis == "+y" and abs(fw.yaw_mount_rad) < 3 * fw.sigma_yaw_rad
 
 
@@ -161,9 +162,9 @@ def test_up_axis_confidence_falls_near_45_degrees():
     f = np.tile([0.0, 9.81 * np.sin(np.radians(44.0)), 9.81 * np.cos(np.radians(44.0))],
                 (3000, 1))
     f += np.random.default_rng(1).normal(size=f.shape) * 0.05
-    up = A.detect_up_axis(f)
+    up = D.detect_up_axis(f)
     assert up.axis == "+z" and 0.5 < up.confidence < 0.99
-    up = A.detect_up_axis(f[:, [2, 0, 1]] * [-1, 1, 1])         # up along −x, level
-    up = A.detect_up_axis(np.tile([-9.81, 0.1, 0.0], (100, 1)))
+    up = D.detect_up_axis(f[:, [2, 0, 1]] * [-1, 1, 1])         # up along −x, level
+    up = D.detect_up_axis(np.tile([-9.81, 0.1, 0.0], (100, 1)))
     assert up.axis == "-x" and up.confidence > 0.999
-    assert A.detect_up_axis(np.tile([0.5, 0.0, 0.2], (100, 1))).confidence == 0.0   # not gravity
+    assert D.detect_up_axis(np.tile([0.5, 0.0, 0.2], (100, 1))).confidence == 0.0   # not gravity

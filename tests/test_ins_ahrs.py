@@ -9,8 +9,8 @@ import pytest
 
 from selfnav import api
 from selfnav import attitude as att
-from selfnav.ins.ahrs import (Ahrs, AhrsConfig, find_still, heading_from_magnetometer,
-                              level_at_rest)
+from selfnav.ins.ahrs import Ahrs, AhrsConfig
+from selfnav.ins.rest import find_still, heading_from_magnetometer, level_at_rest
 from selfnav.sim.scenarios import simulate
 from selfnav.sim.static import static_imu
 from support import run_cli

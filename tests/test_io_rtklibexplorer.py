@@ -7,7 +7,7 @@ import warnings
 import numpy as np
 import pytest
 
-from selfnav import axes as A
+from selfnav import axes_detect as D
 from selfnav.errors import InputError, SelfnavWarning
 from selfnav.io import rtklibexplorer
 from selfnav.io.readers import read_imu
@@ -59,7 +59,7 @@ def test_default_is_the_drive0708_preset_as_before(drive):
 
 def test_up_axis_of_the_raw_logger_is_detected(drive):
     raw = read_imu(drive / "imu_1934.csv", axes="detect")
-    up = A.detect_up_axis(raw.f_ib_b[raw.t < raw.t[0] + 30])
+    up = D.detect_up_axis(raw.f_ib_b[raw.t < raw.t[0] + 30])
     assert up.axis == "+z" and up.confidence > 0.999
 
 

@@ -553,7 +553,8 @@ def estimate_attitude(imu: ImuData, *, gnss: GnssData | None = None, grade: str 
     import math
     from dataclasses import replace
 
-    from selfnav.ins.ahrs import IGRF_DECLINATION_SIGMA_DEG, Ahrs, AhrsConfig, declination_at
+    from selfnav.ins.ahrs import Ahrs, AhrsConfig
+    from selfnav.ins.rest import IGRF_DECLINATION_SIGMA_DEG, declination_at
 
     cfg = config or AhrsConfig(grade=grade, use_mag=use_mag)
     lat = lon = None
