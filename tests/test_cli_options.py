@@ -10,7 +10,7 @@ from selfnav.cli import main
 from selfnav.cli import options as opt
 
 COMMANDS = ("latitude", "moving", "navigate", "simulate", "evaluate", "match", "allan",
-            "montecarlo", "demo", "spp")
+            "montecarlo", "demo", "spp", "attitude")
 
 
 def test_choice_lists_equal_the_librarys():
@@ -24,6 +24,8 @@ def test_choice_lists_equal_the_librarys():
     from selfnav.io import raw_readers
 
     assert opt.RAW_FORMATS == raw_readers.RAW_FORMATS
+    from selfnav import axes
+    assert opt.AXES_PRESETS == axes.preset_names()
 
 
 def _help(capsys, cmd):
@@ -40,7 +42,7 @@ def test_help_lists_choices_and_no_negative_negatives(capsys):
             opts = [ln for ln in text.splitlines() if ln.strip().startswith("--")]
             assert not [ln for ln in opts if "<str>" in ln], cmd   # free text has a metavar
     nav = _help(capsys, "navigate")
-    for needle in ("[ekf|seed]", "[auto|csv|psins|psins-csv|rtklibexplorer|kfgins]",
+    for needle in ("[ekf|seed]", "[auto|csv|psins|psins-csv|rtklibexplorer|kfgins|ulog]",
                    "[wgs84|pz90.11|pz90|sk42]", "[auto|navigation|tactical|industrial|consumer]",
                    "--window-test / --no-window-test", "A FILE"):
         assert needle in " ".join(nav.split()).replace("[ ", "["), needle

@@ -49,3 +49,31 @@ def test_truncated_gzip_is_one_line_not_an_interrupt(tmp_path):
     p.write_bytes(b"\x1f\x8b")
     with pytest.raises(InputError, match="gzip"):
         open_text(p)
+
+
+def test_partial_first_or_last_row_skipped_with_one_warning(tmp_path):
+    """A logger cut off mid-line (issue 20 item 4): the partial row is skipped with one warning
+    naming its line; a bad row elsewhere stays an error naming its line."""
+    import warnings
+
+    from selfnav.errors import InputError, SelfnavWarning
+    from selfnav.io.imu import read_imu_csv
+
+    rows = [f"{0.01 * k:.2f},0,0,0,0,0,9.8" for k in range(1, 8)]
+    p = tmp_path / "imu.csv"
+    p.write_text("t,wx,wy,wz,fx,fy,fz\n" + "\n".join(rows[:-1] + ["0.07,0,0,0"]))
+    with warnings.catch_warnings(record=True) as w:
+        warnings.simplefilter("always")
+        imu = read_imu_csv(p)
+    msgs = [str(x.message) for x in w if issubclass(x.category, SelfnavWarning)]
+    assert len(imu) == 6 and len(msgs) == 1 and "line 8 is a partial row" in msgs[0]
+    p.write_text("t,wx,wy,wz,fx,fy,fz\n" + "\n".join(["0,0,0,", *rows[1:-1], "0.07,0,0,0,0,0,9."
+                                                     "8e"]))
+    with warnings.catch_warnings(record=True) as w:
+        warnings.simplefilter("always")
+        imu = read_imu_csv(p)
+    msgs = [str(x.message) for x in w if issubclass(x.category, SelfnavWarning)]
+    assert len(imu) == 5 and len(msgs) == 1 and "lines 2 and 8 are partial rows" in msgs[0]
+    p.write_text("t,wx,wy,wz,fx,fy,fz\n" + "\n".join(rows[:3] + ["0.04,0,0"] + rows[4:]))
+    with pytest.raises(InputError, match="line 5: has 3 fields where the header has 7"):
+        read_imu_csv(p)

@@ -23,8 +23,8 @@ def test_builtin_scenarios_write_labelled_files(name, tmp_path):
     assert open(out / "truth.csv").readline().startswith("# simulated")
     truth = read_truth(out / "truth.csv")
     assert imu.t[0] > truth.t[0] - 1e-9 and imu.t[-1] <= truth.t[-1] + 1e-9
-    assert abs(imu.dt - 0.01) < 1e-9
-    if name in ("car", "ship"):
+    assert abs(imu.dt - sc.load_scenario(name)["scenario"]["dt"]) < 1e-9   # 0.005: rover, drone
+    if name in ("car", "ship", *sc.PLATFORMS):
         assert imu.mag_b is not None and (out / "mag.csv").is_file()
     if name == "car":
         assert (out / "kotka_karhula.osm.pbf").is_file()

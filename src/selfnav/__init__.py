@@ -24,7 +24,8 @@ The Python API (each also a ``selfnav`` command):
 ``estimate_latitude`` (seed 000), ``navigate_moving`` and ``MovingBaseNavigator`` (seeds
 002/003), ``navigate`` (EKF or seed 004, with or without roads), ``match`` (GNSS-only map
 matching; ``read_fleet``, ``match_fleet`` and ``match_files`` for fleets of tracks) and
-``evaluate`` run the methods; ``simulate`` makes data with known truth.
+``evaluate`` run the methods; ``estimate_attitude`` (an AHRS, :class:`Ahrs`) and
+``compare_attitude`` give attitude from gyros, accelerometers and a magnetometer; ``simulate`` makes data with known truth.
 """
 
 __version__ = "0.2.0"
@@ -41,6 +42,9 @@ _API = {
     "latitude_error_budget": "selfnav.api", "evaluate_report": "selfnav.api",
     "map_coverage": "selfnav.api", "check_map_covers": "selfnav.api", "imu_gaps": "selfnav.api",
     "simulate_files": "selfnav.api", "run_montecarlo": "selfnav.api",
+    "read_baro": "selfnav.api", "estimate_attitude": "selfnav.api",
+    "compare_attitude": "selfnav.api", "read_reference_attitude": "selfnav.api",
+    "Ahrs": "selfnav.ins.ahrs",
     "simulate": "selfnav.sim.scenarios", "MovingBaseNavigator": "selfnav.moving",
     "navigate_moving": "selfnav.moving_driver",
     "ImuData": "selfnav.types", "GnssData": "selfnav.types", "Trajectory": "selfnav.types",

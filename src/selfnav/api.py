@@ -19,7 +19,7 @@ from selfnav.ins import calibrate
 from selfnav.ins.align import robust_init
 from selfnav.io.attitude_file import read_attitude
 from selfnav.io.imu import imu_segments, report_gaps
-from selfnav.io.readers import read_gnss, read_imu, read_imu_positions
+from selfnav.io.readers import read_baro, read_gnss, read_imu, read_imu_positions
 from selfnav.latitude import LatitudeResult
 from selfnav.latitude import estimate_latitude as _estimate_latitude
 from selfnav.latitude import estimate_latitude_multiposition
@@ -497,15 +497,23 @@ def imu_gaps(imu: ImuData, min_missing: int = 1) -> list:
 
 
 def simulate_files(spec, out_dir, *, seed: int = 0, grade: str | None = None,
-                   duration: float | None = None, dt: float | None = None, progress=None):
+                   duration: float | None = None, dt: float | None = None, progress=None,
+                   start: str | None = None, imu_axes=None, imu_mount=None):
     """Simulate a scenario (:func:`selfnav.sim.scenarios.simulate`) and write its files
-    into the folder ``out_dir`` as one set; returns ``(simulation, paths)``."""
+    into the folder ``out_dir`` as one set; returns ``(simulation, paths)``. ``start``:
+    ``rest``/``moving`` for the platforms; ``imu_axes``/``imu_mount``: the IMU written in
+    that axes convention and mounting (:func:`selfnav.sim.scenarios.write_simulation`)."""
     from selfnav.sim.scenarios import simulate, write_simulation
 
-    sim = simulate(spec, seed=seed, grade=grade, duration=duration, dt=dt, progress=progress)
+    if imu_axes is not None or imu_mount is not None:      # a bad spec fails before the work
+        from selfnav.axes import imu_frame
+
+        imu_frame(imu_axes, imu_mount)
+    sim = simulate(spec, seed=seed, grade=grade, duration=duration, dt=dt, start=start,
+                   progress=progress)
     if progress is not None:
         progress("writing")
-    return sim, write_simulation(sim, out_dir)
+    return sim, write_simulation(sim, out_dir, imu_axes=imu_axes, imu_mount=imu_mount)
 
 
 def run_montecarlo(scenario: str, runs: int, *, out=None, **kw):
@@ -517,6 +525,84 @@ def run_montecarlo(scenario: str, runs: int, *, out=None, **kw):
     if out is not None:
         mc.write_results(out, res)
     return res
+
+
+def read_reference_attitude(path) -> "AttitudeData":
+    """An attitude to compare with: a PX4 ULog's own ``vehicle_attitude`` (``.ulg``), or an
+    attitude / truth / solution CSV (``t, roll_deg, pitch_deg, heading_deg``)."""
+    from pathlib import Path
+
+    from selfnav.io.ulog import ULOG_SUFFIXES, read_ulog_attitude
+
+    if Path(path).name.lower().endswith(ULOG_SUFFIXES):
+        return read_ulog_attitude(path)
+    return read_attitude(path)
+
+
+def estimate_attitude(imu: ImuData, *, gnss: GnssData | None = None, grade: str = "consumer",
+                      declination_deg: float | None = None, lat_deg: float | None = None,
+                      lon_deg: float | None = None, h_m: float = 0.0, use_mag: bool = True,
+                      config=None):
+    """Attitude from gyros, accelerometers and magnetometer (:class:`selfnav.ins.ahrs.Ahrs`).
+
+    The declination is, in this order: ``declination_deg``; IGRF-14 at ``lat_deg, lon_deg``
+    or at the first fix of ``gnss`` (σ 0.5°); the declination the file says its own
+    estimator used (a PX4 log's ``ATT_MAG_DECL`` / ``EKF2_MAG_DECL``, ``imu.meta``); else 0
+    with a warning (the heading is then magnetic). The latitude (Earth rate) comes from the
+    same place. ``result.info["declination_source"]`` says which.
+
+    Returns
+    -------
+    selfnav.ins.ahrs.AhrsResult
+    """
+    import math
+    from dataclasses import replace
+
+    from selfnav.ins.ahrs import Ahrs, AhrsConfig
+    from selfnav.ins.rest import IGRF_DECLINATION_SIGMA_DEG, declination_at
+
+    cfg = config or AhrsConfig(grade=grade, use_mag=use_mag)
+    lat = lon = None
+    if lat_deg is not None and lon_deg is not None:
+        lat, lon = math.radians(lat_deg), math.radians(lon_deg)
+    elif gnss is not None and len(gnss):
+        lat, lon, h_m = float(gnss.lat[0]), float(gnss.lon[0]), float(gnss.h[0])
+    have_mag = imu.mag_b is not None and use_mag
+    if declination_deg is not None:
+        dec, s_dec, src = math.radians(declination_deg), 0.0, "given"
+    elif lat is not None:
+        dec, _ = declination_at(lat, lon, h_m)
+        s_dec, src = math.radians(IGRF_DECLINATION_SIGMA_DEG), "igrf"
+    elif imu.meta.get("declination_deg") is not None:
+        dec, s_dec = math.radians(float(imu.meta["declination_deg"])), 0.0
+        src = "file (the logging autopilot's declination parameter)"
+    else:
+        dec, s_dec, src = 0.0, 0.0, "none"
+        if have_mag:
+            warnings.warn(f"{imu.source or 'IMU'}: no position or declination given: the heading "
+                          "is magnetic (give --declination-deg, --lat-deg/--lon-deg or --gnss)",
+                          SelfnavWarning, stacklevel=2)
+    inc = None if lat is None else declination_at(lat, lon, h_m)[1]
+    cfg = replace(cfg, declination=dec, sigma_declination=s_dec, lat=lat, inclination=inc)
+    res = Ahrs(cfg).run(imu)
+    res.info.update({"declination_deg": math.degrees(dec), "declination_source": src,
+                     "latitude_deg": None if lat is None else math.degrees(lat),
+                     "magnetometer": bool(have_mag)})
+    if not res.info.get("start"):
+        raise SelfnavError(f"{imu.source or 'IMU'}: the attitude filter did not start "
+                           f"({len(imu)} samples: too few?)")
+    return res
+
+
+def compare_attitude(result, reference, *, t_from: float | None = None) -> dict:
+    """Roll, pitch and heading differences (RMS, max, mean; within 2σ, NEES) of an attitude
+    run against a reference :class:`~selfnav.types.AttitudeData` from ``t_from`` (default
+    the run's start) on (:func:`selfnav.evaluation.attitude_errors`)."""
+    from selfnav.evaluation import attitude_errors
+
+    t0 = result.info.get("t_start") if t_from is None else t_from
+    return attitude_errors(result.t, result.C_nb, reference.t, reference.C_nb, t_from=t0,
+                           sigma_rph=result.sigma_rph)
 
 
 def as_trajectory(x) -> Trajectory:
@@ -533,7 +619,8 @@ __all__ = ["read_imu", "read_imu_positions", "read_gnss", "read_roads", "read_so
            "match_files", "evaluate", "filter_config", "initial_state", "write_fix_log",
            "Solution", "allan_noise", "latitude_requirements", "latitude_error_budget",
            "evaluate_report", "map_coverage", "check_map_covers", "imu_gaps", "simulate_files",
-           "run_montecarlo", "as_trajectory"]
+           "run_montecarlo", "as_trajectory", "read_baro", "estimate_attitude",
+           "compare_attitude", "read_reference_attitude"]
 
 
 # ---------------------------------------------------------------- raw GNSS (issue 23)

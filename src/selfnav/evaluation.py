@@ -324,3 +324,43 @@ def load_road_polylines(path):
         raise SelfnavError("selfnav.roads.graph has no road_polylines(path): road-relative "
                            "along/cross-track is not available yet")
     return [np.asarray(r, dtype=float) for r in fn(path)]
+
+
+def attitude_errors(t, C_nb, ref_t, ref_C_nb, *, t_from: float | None = None,
+                    sigma_rph=None) -> dict:
+    """Roll, pitch and heading differences of an attitude series against a reference.
+
+    The reference is interpolated onto ``t`` by SLERP (:func:`selfnav.attitude.slerp_dcm`)
+    inside its span; epochs before ``t_from``, outside the reference or NaN are left out. The
+    heading difference is wrapped to ±180°.
+
+    Returns
+    -------
+    dict
+        ``epochs``, ``t_from``, and per angle ``{name}_rms_deg``, ``{name}_max_deg`` (of the
+        absolute difference), ``{name}_mean_deg``; with ``sigma_rph`` (N, 3) rad also
+        ``{name}_within_2sigma`` (fraction of epochs) and ``{name}_nees`` (mean of (d/σ)²).
+    """
+    t = np.asarray(t, dtype=float)
+    C = np.asarray(C_nb, dtype=float)
+    ref_t = np.asarray(ref_t, dtype=float)
+    ok = np.all(np.isfinite(C.reshape(len(t), 9)), axis=1)
+    ok &= (t >= ref_t[0]) & (t <= ref_t[-1])
+    if t_from is not None:
+        ok &= t >= t_from
+    out = {"epochs": int(ok.sum()), "t_from": None if t_from is None else float(t_from)}
+    if not ok.any():
+        return out
+    Cr = att.slerp_dcm(ref_t, np.asarray(ref_C_nb, dtype=float), t[ok])
+    a = att.euler_from_dcm_nb(C[ok])
+    b = att.euler_from_dcm_nb(Cr)
+    for k, name in enumerate(("roll", "pitch", "heading")):
+        d = np.degrees(np.angle(np.exp(1j * (a[k] - b[k]))))
+        out[f"{name}_rms_deg"] = _rms(d)
+        out[f"{name}_max_deg"] = float(np.max(np.abs(d)))
+        out[f"{name}_mean_deg"] = float(np.mean(d))
+        if sigma_rph is not None:
+            s = np.degrees(np.asarray(sigma_rph, dtype=float)[ok, k])
+            out[f"{name}_within_2sigma"] = float(np.mean(np.abs(d) <= 2 * s))
+            out[f"{name}_nees"] = float(np.mean((d / s) ** 2))
+    return out

@@ -199,6 +199,14 @@ def requirements_table(dphi_deg, lat_deg: float = 60.0, *, seed_constants: bool 
 # --------------------------------------------------------------------------------------------
 # The estimator on data
 # --------------------------------------------------------------------------------------------
+def latitude_confidence(sigma: float) -> str:
+    """``"high"`` (σ ≤ 0.1°), ``"medium"`` (≤ 2°) or ``"low"``: how far a latitude σ lets a user
+    trust the number (a record that does not determine the latitude has a σ of tens of
+    degrees, capped at 90°)."""
+    s = float(np.degrees(sigma))
+    return "high" if s <= 0.1 else "medium" if s <= 2.0 else "low"
+
+
 @dataclass
 class LatitudeResult:
     """Result of a latitude estimate. Angles in rad; :meth:`to_dict` gives degrees."""
@@ -248,6 +256,7 @@ class LatitudeResult:
             "disturbance_compensated": self.disturbance_compensated,
             "tilt_change_deg": np.degrees(self.tilt_change),
             "positions": self.positions,
+            "confidence": latitude_confidence(self.sigma),
             "warnings": list(self.warnings),
         }
         if self.gyro_bias_b is not None:
@@ -295,20 +304,36 @@ def _rest_stats(w, f, dt):  # pragma: no cover - compiled
     return wm, fm, wv, fnm, fnv, np.sqrt(exc)
 
 
+#: Gyro white noise above which a gyro may be MEMS grade, °/√h: a tactical FOG has 0.012, a
+#: MEMS 0.15-1 (the industrial ADIS16465 0.15; PX4's filtered consumer gyros ~0.6).
+MEMS_ARW_DEG_PER_SQRT_H = 0.3
+#: |mean ω| / Ω of Earth-rate data in deg/s read as rad/s (180/π).
+DEG_PER_S_RATIO = 180.0 / np.pi
+
+
 def _check_at_rest(imu, path):
     """Refuse wrong gyro units and data that are not at rest; return the plain means."""
     n = len(imu)
     w_mean, f_mean, w_var, _, fn_var, exc = _rest_stats(
         np.ascontiguousarray(imu.omega_ib_b), np.ascontiguousarray(imu.f_ib_b), imu.dt)
     ratio = np.linalg.norm(w_mean) / OMEGA_EARTH
-    if 30.0 < ratio < 90.0:
+    # a gyro noisier than any navigation or tactical gyro read in deg/s is a MEMS gyro, whose
+    # bias alone is tens of Earth rates: its mean rate says nothing about units or turning
+    arw = float(np.degrees(np.sqrt(np.median(np.clip(w_var, 0, None)) * imu.dt)) * 60.0)
+    mems = arw > MEMS_ARW_DEG_PER_SQRT_H
+    if abs(ratio / DEG_PER_S_RATIO - 1.0) < 0.03:     # the Earth rate in deg/s: 57.3 × Ω
         raise InputError(path, f"mean gyro rate is {ratio:.1f} × Earth rate: the gyros look like "
                          "deg/s, the file needs rad/s", column="wx")
     if 1.0e5 < ratio < 4.0e5:
         raise InputError(path, f"mean gyro rate is {ratio:.3g} × Earth rate: the gyros look like "
                          "deg/h, the file needs rad/s", column="wx")
     noise_allow = 5.0 * np.sqrt(np.sum(np.clip(w_var, 0, None))) / np.sqrt(max(n, 1))
-    if np.linalg.norm(w_mean) > 5.0 * OMEGA_EARTH + noise_allow:
+    if mems and ratio > 5.0:
+        warn(f"{path}: the gyros are noisy (white noise {arw:.2g} °/√h, MEMS grade) and their "
+             f"mean rate is {ratio:.3g} × the Earth rate: a MEMS bias (or a slow turn, or "
+             "deg/s) hides the Earth rate, so this record does not determine the latitude (its "
+             "σ says so)")
+    elif np.linalg.norm(w_mean) > 5.0 * OMEGA_EARTH + noise_allow:
         raise NotAtRestError(f"{path}: not at rest: the mean gyro rate is {ratio:.1f} × Earth rate "
                              f"({np.linalg.norm(w_mean) / DEG_PER_H:.4g} °/h); the unit is turning "
                              "(or the gyros are not in rad/s)")
@@ -571,6 +596,10 @@ def estimate_latitude(imu, *, method: str = "optimal", rest: str = "auto", h: fl
     sigma2 = sigma_noise**2
     if abs(ratio - 1.0) > 3.0 * ratio_sig:
         sigma2 += (ratio - 1.0) ** 2
+        # the same unexplained rate, horizontal, turns the gyrocompass heading by up to
+        # (ratio − 1)/cos φ rad
+        sig_heading = float(min(np.hypot(sig_heading, (ratio - 1.0) / max(np.cos(lat), 1e-3)),
+                                np.pi))
         warnings.append(f"|mean ω| is {100 * (ratio - 1):+.2f}% off Earth rate "
                         f"({abs(ratio - 1) / max(ratio_sig, 1e-300):.0f}σ of its noise): gyro bias "
                         f"or scale error; sigma widened by {np.degrees(abs(ratio - 1)):.3f}°")

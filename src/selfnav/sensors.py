@@ -514,6 +514,10 @@ class GnssModel:
     outliers : list of :class:`OutlierWindow`
     spike_rate : probability of a multipath spike per fix; spike_sigma its horizontal σ, m
     datum : "wgs84", "pz90" or "sk42" (converted with :mod:`selfnav.datum`)
+    sigma_corr_h, tau_corr : a slowly drifting horizontal error (the stand-alone receiver's
+        atmosphere and orbit errors): :func:`drift_errors` of steady-state σ ``sigma_corr_h``
+        (m, per axis) and time constant ``tau_corr`` (s), from its steady state; 0: none. The
+        σ the receiver reports is then ``hypot(sigma_h, sigma_corr_h)``.
     """
 
     rate_hz: float = 1.0
@@ -525,6 +529,8 @@ class GnssModel:
     spike_rate: float = 0.0
     spike_sigma: float = 50.0
     datum: str = "wgs84"
+    sigma_corr_h: float = 0.0
+    tau_corr: float = 60.0
 
     def simulate(self, traj, rng) -> GnssFixes:
         """Fixes along a :class:`~selfnav.types.Trajectory` (interpolated)."""
@@ -554,6 +560,15 @@ class GnssModel:
             err[m, :2] = e
         spike = rng.uniform(size=n) < self.spike_rate
         err[spike, :2] += rng.normal(size=(int(spike.sum()), 2)) * self.spike_sigma
+        sig_rep = self.sigma_h
+        if self.sigma_corr_h > 0 and n:
+            # on the uniform grid (outages cut rows, not time), then at the fix times
+            grid = np.arange(t[0], t[-1] + 0.5 * dt, dt)
+            e = drift_errors(len(grid), dt, self.sigma_corr_h, self.tau_corr, rng,
+                             start="stationary")
+            idx = np.clip(np.round((t - t[0]) / dt).astype(int), 0, len(grid) - 1)
+            err[:, :2] += e[idx]
+            sig_rep = float(np.hypot(self.sigma_h, self.sigma_corr_h))
         R_phi, R_lam = radii(lat, h)
         lat_m = lat + err[:, 1] / R_phi
         lon_m = lon + err[:, 0] / (R_lam * np.cos(lat))
@@ -566,7 +581,7 @@ class GnssModel:
             except ImportError:
                 raise SelfnavError("GNSS output in another datum needs selfnav.datum") from None
             lat_m, lon_m, h_m = _datum.convert(lat_m, lon_m, h_m, "wgs84", self.datum)
-        return GnssFixes(t, lat_m, np.angle(np.exp(1j * lon_m)), h_m, np.full(n, self.sigma_h),
+        return GnssFixes(t, lat_m, np.angle(np.exp(1j * lon_m)), h_m, np.full(n, sig_rep),
                          vel_m, err, outlier, spike, list(self.outliers), self.datum)
 
 

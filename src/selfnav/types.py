@@ -195,3 +195,19 @@ class OdometerData:
     def shifted(self, dt_s: float) -> "OdometerData":
         """The same samples with ``dt_s`` added to every time stamp."""
         return replace(self, t=self.t + dt_s, meta=dict(self.meta))
+
+
+@dataclass
+class BaroData:
+    """Barometer samples: ``t`` (N,) s, ``altitude_m`` (N,) barometric altitude (the sensor's
+    own conversion, above its reference pressure, not ellipsoidal), ``pressure_pa`` and
+    ``temperature_c`` where known."""
+
+    t: np.ndarray
+    altitude_m: np.ndarray
+    pressure_pa: np.ndarray | None = None
+    temperature_c: np.ndarray | None = None
+    source: str = ""
+
+    def __len__(self) -> int:
+        return len(self.t)

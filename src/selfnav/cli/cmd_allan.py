@@ -15,6 +15,8 @@ def register(app: typer.Typer) -> None:
     def allan_cmd(
         imu: opt.ImuArgument,
         imu_format: opt.ImuFormat = "auto",
+        imu_axes: opt.ImuAxes = None,
+        imu_mount: opt.ImuMount = None,
         as_json: opt.Json = False,
         plot: Annotated[Optional[Path], typer.Option(
             "--plot", help="Write the log-log plot to this PNG FILE (no plot without it).")] = None,
@@ -29,7 +31,7 @@ def register(app: typer.Typer) -> None:
 
         if plot is not None:
             check_output_file(plot, (".png",))
-        data = api.read_imu(imu, fmt_old or imu_format)
+        data = api.read_imu(imu, fmt_old or imu_format, axes=imu_axes, mount=imu_mount)
         out = api.allan_noise(data, plot=plot, title=f"Allan deviation: {imu.name}")
         if as_json:
             emit_json(out)

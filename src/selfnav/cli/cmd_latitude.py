@@ -33,6 +33,8 @@ def register(app: typer.Typer) -> None:
         imu: Annotated[Optional[List[Path]], typer.Argument(
             help="IMU file(s) at rest; several files = several positions.")] = None,
         imu_format: opt.ImuFormat = "auto",
+        imu_axes: opt.ImuAxes = None,
+        imu_mount: opt.ImuMount = None,
         method: Annotated[str, opt.choice_option(
             "--method", choices=("optimal", "seed"),
             help="optimal (reaches the Cramér–Rao bound) or seed (formula (1.4) with "
@@ -68,7 +70,8 @@ def register(app: typer.Typer) -> None:
             return
         if not imu:
             raise SelfnavError("give an IMU file (or --requirements); see selfnav latitude --help")
-        data = api.read_imu_positions(imu, fmt_old or imu_format)
+        data = api.read_imu_positions(imu, fmt_old or imu_format, axes=imu_axes,
+                                      mount=imu_mount)
         multi = data.position is not None and len(np.unique(data.position)) > 1
         kw = {"h": h_m} if multi else {"rest": rest, "h": h_m}
         res = api.estimate_latitude(data, method=method, **kw)

@@ -42,6 +42,8 @@ def register(app: typer.Typer) -> None:
                                  "sigma_lon_deg, one row per IMU sample"),
         json_out: bool = typer.Option(False, "--json", help="print one JSON summary on stdout"),
         fmt: str = typer.Option("auto", "--format", help="IMU format: auto, csv or psins"),
+        imu_axes: opt.ImuAxes = None,
+        imu_mount: opt.ImuMount = None,
         imu_rates: str = typer.Option(
             "interval-mean", "--imu-rates", metavar="[" + "|".join(RATE_CHOICES) + "]",
             help="what an IMU rate row is: interval-mean (default, the package's convention: the "
@@ -102,7 +104,7 @@ def register(app: typer.Typer) -> None:
         status = (contextlib.nullcontext() if json_out
                   else Console(stderr=True).status("reading IMU and attitude ..."))
         with status as st:
-            imu_data = read_imu(imu, fmt)
+            imu_data = read_imu(imu, fmt, axes=imu_axes, mount=imu_mount)
             att_data = read_attitude(attitude)
             if st is not None:
                 st.update(f"moving-base latitude/longitude on {len(imu_data)} samples ...")

@@ -66,6 +66,8 @@ def register(app: typer.Typer) -> None:
         smooth: Annotated[bool, typer.Option("--smooth", help="RTS smoother "
                                              "(post-processing).")] = False,
         imu_format: opt.ImuFormat = "auto",
+        imu_axes: opt.ImuAxes = None,
+        imu_mount: opt.ImuMount = None,
         gnss_format: opt.GnssFormat = "auto",
         gnss_datum: opt.GnssDatum = "wgs84",
         out_datum: opt.OutDatum = "wgs84",
@@ -131,7 +133,7 @@ def register(app: typer.Typer) -> None:
             raise SelfnavError("navigate needs --gnss FILE (or an initial state: --init FILE)")
         lever = None if lever_arm is None else _vec3(lever_arm, "--lever-arm")
         nhc_arm = _vec3(nhc_lever, "--nhc-lever")
-        data = _magnetometer(api.read_imu(imu, imu_format), mag)
+        data = _magnetometer(api.read_imu(imu, imu_format, axes=imu_axes, mount=imu_mount), mag)
         check_imu_rate(data, "navigate", min_duration_s=MIN_IMU_S, max_dt_s=MAX_IMU_DT_S,
                        warn_dt_s=WARN_IMU_DT_S)
         g = api.read_gnss(gnss, gnss_format, gnss_datum) if gnss is not None else None

@@ -2,7 +2,7 @@
 from __future__ import annotations
 
 import sys
-from typing import Annotated
+from typing import Annotated, Optional
 
 import typer
 
@@ -16,7 +16,8 @@ def register(app: typer.Typer) -> None:
     @app.command("simulate")
     def simulate_cmd(
         scenario: Annotated[str, typer.Argument(
-            metavar="SCENARIO", help="static, multiposition, ship, aircraft, car, or a TOML scenario file.")],
+            metavar="SCENARIO", help="static, multiposition, ship, aircraft, car; the platforms "
+                                     "pedestrian, rover, boat, drone; or a TOML scenario file.")],
         out: opt.out_folder("Folder for imu.csv, gnss.csv, gnss_errors.csv, truth.csv, "
                             "mag.csv and the map (car)."),
         seed: opt.Seed = 0,
@@ -25,6 +26,17 @@ def register(app: typer.Typer) -> None:
                                optional=True) = None,
         dt: opt.positive("--dt", help="IMU sample interval, s (default 0.01; at most 0.1 for a "
                                       "moving vehicle).", optional=True) = None,
+        start: Annotated[Optional[str], opt.choice_option(
+            "--start", choices=("rest", "moving"),
+            help="Platforms (pedestrian, rover, boat, drone): start at rest (the default) or "
+                 "already moving.")] = None,
+        imu_axes: Annotated[Optional[str], typer.Option(
+            "--imu-axes", metavar="AXES", callback=opt.check_axes,
+            help="Write imu.csv and mag.csv in these sensor axes (FRD, FLU, x=-F,y=R,z=U, a "
+                 "preset, ...; see selfnav navigate --help); default body RFU.")] = None,
+        imu_mount: Annotated[Optional[str], typer.Option(
+            "--imu-mount", metavar="R,P,Y", callback=opt.check_mount,
+            help="Write the IMU as mounted at roll, pitch, yaw deg on the vehicle.")] = None,
         as_json: opt.Json = False,
     ):
         """Simulate a scenario and write imu.csv, gnss.csv, truth.csv, mag.csv and the map."""
@@ -47,7 +59,9 @@ def register(app: typer.Typer) -> None:
                 ctx.update(task, advance=1, description=name)
         try:
             sim, paths = api.simulate_files(scenario, out, seed=seed, grade=grade,
-                                            duration=duration, dt=dt, progress=stage)
+                                            duration=duration, dt=dt, progress=stage,
+                                            start=start, imu_axes=imu_axes,
+                                            imu_mount=imu_mount)
         finally:
             if ctx is not None:
                 ctx.stop()
@@ -62,6 +76,9 @@ def register(app: typer.Typer) -> None:
                 {"start_s": w.start, "end_s": w.end, "sigma_m": w.sigma, "kind": w.kind}
                 for w in g.windows],
             "simulated": True,
+            "start": sim.config["scenario"].get("start"),
+            "imu_axes": imu_axes or "RFU",
+            "imu_mount_deg": list(imu_mount) if imu_mount is not None else [0.0, 0.0, 0.0],
         }
         if as_json:
             emit_json(res)

@@ -16,8 +16,10 @@ from typing import Annotated, Callable, Optional
 
 import typer
 
-IMU_FORMATS = ("auto", "csv", "psins", "psins-csv", "rtklibexplorer", "kfgins")
-GNSS_FORMATS = ("auto", "csv", "pos", "nmea", "psins-avp")
+IMU_FORMATS = ("auto", "csv", "psins", "psins-csv", "rtklibexplorer", "kfgins", "ulog")
+GNSS_FORMATS = ("auto", "csv", "pos", "nmea", "psins-avp", "ulog")
+#: :data:`selfnav.axes.PRESETS` (``tests/test_cli_options.py`` checks they are the same)
+AXES_PRESETS = ("rtklibexplorer-drive0708", "px4", "kfgins", "ros")
 DATUMS = ("wgs84", "pz90.11", "pz90", "sk42")
 GRADES = ("navigation", "tactical", "industrial", "consumer")
 SIM_GRADES = (*GRADES, "perfect")
@@ -60,7 +62,8 @@ def datum_key_lazy(name: str) -> str:
 # ---------------------------------------------------------------- inputs
 ImuFile = Annotated[Path, typer.Option(
     "--imu", help="IMU file: native CSV (t, wx, wy, wz, fx, fy, fz; s, rad/s, m/s²), PSINS "
-                  ".imu, rtklibexplorer CSV with its .tag, KF-GINS (see --imu-format).")]
+                  ".imu, rtklibexplorer CSV with its .tag, KF-GINS, PX4 ULog .ulg (see "
+                  "--imu-format).")]
 ImuArgument = Annotated[Path, typer.Argument(
     help="IMU record (native CSV, PSINS .imu, ...; see --imu-format).")]
 GnssFile = Annotated[Path, typer.Option(
@@ -74,15 +77,51 @@ MapFile = Annotated[Optional[Path], typer.Option(
     "--map", help="Road map: OpenStreetMap .osm or .osm.pbf.")]
 ImuFormat = Annotated[str, choice_option(
     "--imu-format", choices=IMU_FORMATS,
-    help="Format of the IMU file; auto: by name (.imu PSINS, a .tag beside it rtklibexplorer, "
-         "else CSV). rtklibexplorer applies upstream's -0.125 s time offset.")]
+    help="Format of the IMU file; auto: by name (.imu PSINS, .ulg PX4 ULog, a .tag beside it "
+         "rtklibexplorer, else CSV). rtklibexplorer applies upstream's -0.125 s time offset.")]
 #: the old spelling of ``--imu-format`` (hidden; still accepted)
 ImuFormatOld = Annotated[Optional[str], choice_option(
     "--format", choices=IMU_FORMATS, help="Same as --imu-format.", hidden=True)]
+
+
+def check_axes(value):
+    if value is None:
+        return None
+    from selfnav.axes import AxesError, imu_frame
+
+    try:
+        imu_frame(value)
+    except AxesError as e:
+        raise typer.BadParameter(str(e)) from None
+    return value.strip()
+
+
+def check_mount(value):
+    if value is None:
+        return None
+    from selfnav.axes import AxesError, parse_mount
+
+    try:
+        return parse_mount(value)
+    except AxesError as e:
+        raise typer.BadParameter(str(e)) from None
+
+
+ImuAxes = Annotated[Optional[str], typer.Option(
+    "--imu-axes", metavar="AXES", callback=check_axes,
+    help="What the IMU file's x, y, z point to: three letters of R L F B U D (right, left, "
+         "forward, back, up, down; NED reads as FRD), e.g. FRD, RFU, FLU, or x=-F,y=R,z=U; a "
+         "preset (" + ", ".join(AXES_PRESETS) + "); or detect (left as the file has them, the "
+         "navigator detects). Default: the format's documented axes (docs/readers.md).")]
+ImuMount = Annotated[Optional[str], typer.Option(
+    "--imu-mount", metavar="R,P,Y", callback=check_mount,
+    help="Roll, pitch, yaw of the IMU on the vehicle, deg (DESIGN §2 conventions: yaw "
+         "clockwise from above, pitch nose-up, roll right side down), applied after "
+         "--imu-axes; overrides a preset's.")]
 GnssFormat = Annotated[str, choice_option(
     "--gnss-format", choices=GNSS_FORMATS,
     help="Format of the GNSS file; auto: by extension (.pos RTKLIB, .nmea/.nma/.gga NMEA, "
-         "else CSV).")]
+         ".ulg PX4 ULog, else CSV).")]
 GnssDatum = Annotated[str, choice_option(
     "--gnss-datum", choices=DATUMS, normalize=datum_key_lazy,
     help="Datum of the GNSS file's coordinates (converted to WGS-84 on reading).")]

@@ -147,6 +147,8 @@ def read_table(path, required, optional=(), *, numeric=True):
     except ValueError:
         arr = None
     if arr is None:
+        body, arr = _without_partial_ends(path, body, delim, ncol, usecols, lines)
+    if arr is None:
         # find the first offending row for a precise message
         data_lines = [ln for ln in body.split("\n") if ln.strip() and not ln.lstrip().startswith("#")]
         for k, line in enumerate(data_lines):
@@ -176,6 +178,45 @@ def read_table(path, required, optional=(), *, numeric=True):
     out["_lines"] = lines
     out["_path"] = str(path)
     return out
+
+
+def _row_ok(line, delim, ncol, usecols):
+    parts = [p.strip() for p in (line.split(delim) if delim else line.split())]
+    if len(parts) < ncol:
+        return False
+    try:
+        [float(parts[c]) for c in usecols]
+    except ValueError:
+        return False
+    return True
+
+
+def _without_partial_ends(path, body, delim, ncol, usecols, lines):
+    """A logger cut off mid-line leaves a partial first or last data row: each is skipped
+    (turned into a comment, so the line numbers stay) with one warning, and the table read
+    again. Returns ``(body, array or None)``; None when the problem lies elsewhere."""
+    from selfnav.errors import warn
+
+    rows = body.split("\n")
+    data = [i for i, ln in enumerate(rows) if ln.strip() and not ln.lstrip().startswith("#")]
+    if len(data) < 3:
+        return body, None
+    cut = [i for i in {data[0], data[-1]} if not _row_ok(rows[i], delim, ncol, usecols)]
+    if not cut:
+        return body, None
+    where = sorted(int(lines[data.index(i)]) for i in cut)
+    for i in cut:
+        rows[i] = "# (partial row skipped)"
+    new = "\n".join(rows)
+    try:
+        arr = np.loadtxt(io.StringIO(new), delimiter=delim, usecols=usecols, ndmin=2,
+                         comments="#", dtype=float)
+    except ValueError:
+        return body, None
+    warn(f"{path}: line{'s' if len(where) > 1 else ''} {' and '.join(map(str, where))} "
+         f"{'are partial rows' if len(where) > 1 else 'is a partial row'} (fewer fields or a "
+         "number cut short: the logger started or stopped mid-line), skipped")
+    return new, arr
 
 
 def check_time(table, column="t", *, min_rows=1):

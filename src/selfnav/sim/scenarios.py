@@ -2,12 +2,15 @@
 
 A scenario is a dict (or a TOML file) with sections::
 
-    [scenario]  kind = "static" | "multiposition" | "ship" | "aircraft" | "car"
+    [scenario]  kind = "static" | "multiposition" | "ship" | "aircraft" | "car" |
+                       "pedestrian" | "rover" | "boat" | "drone"
                 duration = 600.0   dt = 0.01   lat_deg, lon_deg, h_m (start)
                 truth_hz = 10      (0: the IMU rate)
+                start = "rest" | "moving"   (the platforms of :mod:`selfnav.sim.platforms`)
     [motion]    keyword arguments of the trajectory generator of that kind
     [imu]       grade = "navigation" | "tactical" | "industrial" | "consumer" | "perfect"
     [gnss]      enabled, rate_hz, sigma_m, sigma_v_m, datum, spike_rate, spike_sigma_m,
+                correlated_sigma_m, correlation_s (a slowly drifting error, stand-alone GPS),
                 outages = [[t0, t1], ...],
                 outliers = "seed004" | [{start, duration, sigma_m, kind, tau}, ...]
     [mag]       enabled, noise_nt, hard_iron_nt = [x, y, z], field_model
@@ -33,7 +36,13 @@ from selfnav import sensors
 from selfnav.errors import InputError, SelfnavError
 from selfnav.types import ImuData, OdometerData, Trajectory
 
-BUILTIN = ("static", "multiposition", "ship", "aircraft", "car")
+BUILTIN = ("static", "multiposition", "ship", "aircraft", "car", "pedestrian", "rover", "boat",
+           "drone")
+#: Kinds that move (an IMU interval above MAX_MOVING_DT cannot follow them).
+MOVING = ("ship", "aircraft", "car", "pedestrian", "rover", "boat", "drone")
+#: The platforms of issue 20 and their start (``[scenario] start``, ``--start``).
+PLATFORMS = ("pedestrian", "rover", "boat", "drone")
+STARTS = ("rest", "moving")
 
 DEFAULTS = {
     "static": {"scenario": {"duration": 600.0, "lat_deg": 50.45, "lon_deg": 30.5236, "h_m": 180.0},
@@ -55,10 +64,37 @@ DEFAULTS = {
             "gnss": {"enabled": True, "sigma_m": 10.0, "outliers": "seed004",
                      "spike_rate": 0.005},
             "mag": {"enabled": True}},
+    # issue 20: the platforms (selfnav.sim.platforms); GNSS with a drifting part where the
+    # receiver is stand-alone
+    "pedestrian": {"scenario": {"duration": 300.0, "lat_deg": 48.0, "lon_deg": 11.0,
+                                "h_m": 500.0, "start": "rest"},
+                   "imu": {"grade": "consumer"},
+                   "gnss": {"enabled": True, "rate_hz": 1.0, "sigma_m": 1.5,
+                            "correlated_sigma_m": 1.0, "correlation_s": 30.0},
+                   "mag": {"enabled": True}},
+    "rover": {"scenario": {"duration": 600.0, "dt": 0.005, "lat_deg": 40.1,
+                           "lon_deg": -105.15, "h_m": 1600.0, "start": "rest"},
+              "imu": {"grade": "consumer"},
+              "gnss": {"enabled": True, "rate_hz": 20.0, "sigma_m": 0.5,
+                       "correlated_sigma_m": 1.5, "correlation_s": 60.0},
+              "mag": {"enabled": True}},
+    "boat": {"scenario": {"duration": 900.0, "lat_deg": 59.4, "lon_deg": 24.7, "h_m": 0.0,
+                          "start": "rest"},
+             "imu": {"grade": "industrial"},
+             "gnss": {"enabled": True, "rate_hz": 1.0, "sigma_m": 2.0,
+                      "correlated_sigma_m": 1.5, "correlation_s": 60.0},
+             "mag": {"enabled": True}},
+    "drone": {"scenario": {"duration": 300.0, "dt": 0.005, "lat_deg": 47.4, "lon_deg": 8.55,
+                           "h_m": 450.0, "start": "rest"},
+              "imu": {"grade": "consumer"},
+              "gnss": {"enabled": True, "rate_hz": 5.0, "sigma_m": 0.7,
+                       "correlated_sigma_m": 1.0, "correlation_s": 60.0},
+              "mag": {"enabled": True}},
 }
 COMMON = {"scenario": {"dt": 0.01, "truth_hz": 10.0}, "motion": {},
           "gnss": {"rate_hz": 1.0, "sigma_v_m": None, "datum": "wgs84", "outages": [],
-                   "outliers": [], "spike_rate": 0.0, "spike_sigma_m": 50.0},
+                   "outliers": [], "spike_rate": 0.0, "spike_sigma_m": 50.0,
+                   "correlated_sigma_m": 0.0, "correlation_s": 60.0},
           "mag": {"enabled": False, "noise_nt": 100.0, "hard_iron_nt": None, "field_model": "auto"},
           "odometer": {"enabled": False, "scale_factor_sigma": 0.005, "quantum_mps": 0.01,
                        "noise_mps": 0.0, "rate_hz": 10.0}}
@@ -162,6 +198,11 @@ def _motion(cfg, rng_seed, progress):
         from selfnav.sim.aircraft import aircraft_trajectory
 
         traj = aircraft_trajectory(T, dt, lat, lon, h, seed=rng_seed, **mo)
+    elif kind in PLATFORMS:
+        from selfnav.sim.platforms import GENERATORS
+
+        traj = GENERATORS[kind](T, dt, lat, lon, h, start=str(sc.get("start", "rest")),
+                                seed=rng_seed, **mo)
     else:  # car
         from selfnav.roads.graph import packaged_map, read_roads
         from selfnav.sim.car import car_route
@@ -189,6 +230,8 @@ def _gnss_model(g, truth, rng) -> sensors.GnssModel:
                                      float(w.get("tau", 60.0))) for w in out]
     s = float(g["sigma_m"])
     return sensors.GnssModel(rate_hz=float(g["rate_hz"]), sigma_h=s,
+                             sigma_corr_h=float(g.get("correlated_sigma_m") or 0.0),
+                             tau_corr=float(g.get("correlation_s") or 60.0),
                              sigma_v=float(g["sigma_v_m"] if g["sigma_v_m"] is not None else 1.5 * s),
                              outages=[tuple(map(float, o)) for o in g["outages"]], outliers=out,
                              spike_rate=float(g["spike_rate"]),
@@ -207,7 +250,9 @@ def check_scenario(cfg: dict) -> None:
     T, dt = float(sc["duration"]), float(sc["dt"])
     if not T > 0 or not dt > 0:
         raise SelfnavError(f"scenario duration and dt must be positive (got {T:g} s, {dt:g} s)")
-    if sc["kind"] in ("ship", "aircraft", "car") and dt > MAX_MOVING_DT:
+    if sc.get("start", "rest") not in STARTS:
+        raise SelfnavError(f"scenario start = '{sc['start']}': use rest or moving")
+    if sc["kind"] in MOVING and dt > MAX_MOVING_DT:
         raise SelfnavError(f"dt = {dt:g} s ({1 / dt:.3g} Hz) cannot follow a moving {sc['kind']}: "
                            f"use an IMU interval of at most {MAX_MOVING_DT:g} s")
     if T / dt < 100:
@@ -225,7 +270,7 @@ def check_scenario(cfg: dict) -> None:
 
 
 def simulate(spec, *, seed: int = 0, grade: str | None = None, duration: float | None = None,
-             dt: float | None = None, progress=None) -> Simulation:
+             dt: float | None = None, start: str | None = None, progress=None) -> Simulation:
     """Run a scenario: trajectory, exact inverse strapdown, IMU/GNSS/magnetometer errors.
 
     Parameters
@@ -234,6 +279,7 @@ def simulate(spec, *, seed: int = 0, grade: str | None = None, duration: float |
     seed : int
     grade : IMU grade overriding the scenario's
     duration, dt : s, overriding the scenario's
+    start : ``"rest"`` or ``"moving"``, overriding the scenario's (platforms)
     progress : callable(str), optional, told the name of each stage
     """
     progress = progress or (lambda stage: None)
@@ -244,6 +290,11 @@ def simulate(spec, *, seed: int = 0, grade: str | None = None, duration: float |
         cfg["scenario"]["duration"] = float(duration)
     if dt is not None:
         cfg["scenario"]["dt"] = float(dt)
+    if start is not None:
+        if cfg["scenario"]["kind"] not in PLATFORMS:
+            raise SelfnavError(f"--start is for the platforms ({', '.join(PLATFORMS)}), not "
+                               f"'{cfg['scenario']['kind']}'")
+        cfg["scenario"]["start"] = str(start)
     check_scenario(cfg)
     model = sensors.imu_grade(cfg["imu"]["grade"])   # fail early on a bad grade
     ss = np.random.SeedSequence(int(seed))
@@ -308,19 +359,32 @@ def _interp_attitude(truth, t):
     return truth.C_nb[k]
 
 
-def write_simulation(sim: Simulation, out_dir) -> list[Path]:
+def write_simulation(sim: Simulation, out_dir, *, imu_axes=None, imu_mount=None) -> list[Path]:
     """Write ``imu.csv``, ``truth.csv``, ``gnss.csv``, ``gnss_errors.csv``, ``mag.csv``,
     ``odometer.csv`` (``t, speed_mps``, when simulated) and the map (DESIGN §6 columns), each
     with a ``# simulated ...`` comment line; returns the paths.
 
     The files are written as one set (:func:`selfnav.io.output.atomic_folder`): into a folder
     that holds an older simulation, an interrupt leaves the old set or the new one, never a
-    mix; other files in the folder are left alone."""
+    mix; other files in the folder are left alone.
+
+    ``imu_axes``, ``imu_mount`` (:func:`selfnav.axes.imu_frame`): write ``imu.csv`` and
+    ``mag.csv`` as a sensor in that axes convention and mounting would give them
+    (:func:`selfnav.axes.from_vehicle`; a comment line says which); ``read_imu(...,
+    axes=..., mount=...)`` reads them back into the vehicle's RFU frame (exactly, for axes
+    alone: a signed permutation of the same digits)."""
     from selfnav.io.output import atomic_folder
 
     out = Path(out_dir)
+    frame = None
+    if imu_axes is not None or imu_mount is not None:
+        from selfnav.axes import DETECT, AxesError, imu_frame
+
+        frame = imu_frame(imu_axes, imu_mount)
+        if frame == DETECT:
+            raise AxesError("the simulated IMU is written in given axes, not 'detect'")
     with atomic_folder(out, owned=SIMULATION_FILES) as tmp:
-        names = _write_simulation_files(sim, tmp)
+        names = _write_simulation_files(sim, tmp, frame)
     return [out / n for n in names]
 
 
@@ -330,7 +394,7 @@ SIMULATION_FILES = ("imu.csv", "mag.csv", "truth.csv", "gnss.csv", "gnss_errors.
                     "MAP_ATTRIBUTION.txt")
 
 
-def _write_simulation_files(sim: Simulation, out: Path) -> list[str]:
+def _write_simulation_files(sim: Simulation, out: Path, frame=None) -> list[str]:
     """Write the files of :func:`write_simulation` into the folder ``out``; their names."""
     from selfnav.io.csvio import write_csv
     from selfnav.io.output import atomic_copy, atomic_write_text
@@ -341,6 +405,14 @@ def _write_simulation_files(sim: Simulation, out: Path) -> list[str]:
            f"{sim.imu.meta.get('seed')}, IMU grade {sim.config['imu']['grade']}")
     paths = []
     imu = sim.imu
+    axes_note = "body RFU"
+    if frame is not None and not frame.is_identity:
+        from selfnav.axes import from_vehicle
+
+        imu = from_vehicle(imu, frame)
+        axes_note = (f"sensor {frame.describe()} (read with --imu-axes {frame.axes.letters}"
+                     + (" --imu-mount " + ",".join(f"{v:g}" for v in frame.mount_deg)
+                        if frame.has_mount else "") + "; the truth is the vehicle's RFU)")
     cols = {"t": imu.t, "wx": imu.omega_ib_b[:, 0], "wy": imu.omega_ib_b[:, 1],
             "wz": imu.omega_ib_b[:, 2], "fx": imu.f_ib_b[:, 0], "fy": imu.f_ib_b[:, 1],
             "fz": imu.f_ib_b[:, 2]}
@@ -350,12 +422,12 @@ def _write_simulation_files(sim: Simulation, out: Path) -> list[str]:
         cols["position"] = imu.position
     fmt = {"t": "%.6f", "position": "%d"}
     paths.append(write_csv(out / "imu.csv", cols, comments=[
-        tag, "body RFU; rad/s and m/s^2, mean over the interval ending at t"
+        tag, f"{axes_note}; rad/s and m/s^2, mean over the interval ending at t"
         + ("; mx,my,mz magnetometer in nT" if imu.mag_b is not None else "")], fmt=fmt))
     if imu.mag_b is not None:
         paths.append(write_csv(out / "mag.csv", {"t": imu.t, "mx": imu.mag_b[:, 0],
                                                  "my": imu.mag_b[:, 1], "mz": imu.mag_b[:, 2]},
-                               comments=[tag, "magnetometer, body RFU, nT (hard and soft iron, "
+                               comments=[tag, f"magnetometer, {axes_note}, nT (hard and soft iron, "
                                          f"field model {imu.meta.get('mag_field_model')})"],
                                fmt={"t": "%.6f"}))
     paths.append(write_truth(out / "truth.csv", sim.truth, comments=[tag]))

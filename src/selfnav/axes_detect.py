@@ -1,0 +1,401 @@
+"""Detection of an IMU's axes from its data (issue 20): the up axis from gravity, the forward axis
+and the fine yaw mounting from the GNSS accelerations on a vehicle (:mod:`selfnav.axes` holds the
+notation these return in).
+
+Pure functions of whatever window of samples they are given, so that a causal navigator can
+call them on its first seconds; each returns what it found with a σ and a confidence, and
+:func:`compare_frames` says in one line where a given frame disagrees with a detected one.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from selfnav.axes import AxesError, ImuFrame, axes_from_matrix, axis_label
+from selfnav.earth import radii
+from selfnav.errors import SelfnavError
+from selfnav.types import GnssData, ImuData
+
+
+# --------------------------------------------------------------------------- detection: up
+def _phi(x):
+    return 0.5 * (1.0 + math.erf(x / math.sqrt(2.0)))
+
+
+def _block_means(x, n_blocks):
+    n = len(x) // n_blocks * n_blocks
+    if n_blocks < 2 or n == 0:
+        return None
+    return x[:n].reshape(n_blocks, -1, x.shape[1]).mean(axis=1)
+
+
+@dataclass
+class UpAxis:
+    """The sensor axis that points up, found from gravity (:func:`detect_up_axis`).
+
+    Attributes
+    ----------
+    axis : str
+        ``"+z"``, ``"-x"``, …: the signed sensor axis nearest to the mean specific force.
+    index, sign : int
+        The same as an index 0..2 and ±1.
+    up_s : (3,) unit vector
+        Mean specific force direction in sensor axes (the measured up).
+    tilt_rad : float
+        Angle between ``up_s`` and the chosen axis.
+    sigma_rad : float
+        1σ of the direction ``up_s`` (scatter of the window, accelerometer bias prior).
+    confidence : float
+        Probability (Gaussian, from ``sigma_rad``) that the chosen axis is the nearest one to
+        the true up; 0 when the mean |f| is not gravity.
+    gravity_ratio : float
+        ``|mean f| / 9.80665``.
+    samples : int
+    """
+
+    axis: str
+    index: int
+    sign: int
+    up_s: np.ndarray
+    tilt_rad: float
+    sigma_rad: float
+    confidence: float
+    gravity_ratio: float
+    samples: int
+
+    def to_dict(self) -> dict:
+        return {"axis": self.axis, "tilt_deg": math.degrees(self.tilt_rad),
+                "sigma_deg": math.degrees(self.sigma_rad), "confidence": self.confidence,
+                "gravity_ratio": self.gravity_ratio, "samples": self.samples}
+
+
+#: Standard gravity, m/s² (the unit of ``gravity_ratio``).
+G0 = 9.80665
+
+
+def detect_up_axis(f_s, *, accel_bias_sigma: float = 0.2, blocks: int = 10) -> UpAxis:
+    """The up axis of a sensor from the specific force of a window of samples.
+
+    The mean specific force of a window points up (``f = −g`` at rest; a vehicle's own
+    accelerations average out over seconds). Its direction's σ combines the scatter of
+    ``blocks`` consecutive block means (which sees the vehicle's accelerations, correlated
+    over seconds) with an accelerometer bias prior ``accel_bias_sigma`` m/s² (the consumer
+    grade's 2 mg is 0.02; 0.2 leaves room for cheaper parts). The confidence is the Gaussian
+    probability that the true direction lies nearer to the chosen axis than to the next one:
+    ``Φ((θ₂ − θ₁) / (2σ))``.
+
+    Parameters
+    ----------
+    f_s : (N, 3) specific force, m/s², in the sensor's own axes
+    accel_bias_sigma : m/s²
+    blocks : number of block means for the scatter
+
+    Returns
+    -------
+    UpAxis
+    """
+    f = np.asarray(f_s, dtype=float)
+    if f.ndim != 2 or f.shape[1] != 3 or len(f) < 2:
+        raise SelfnavError("detect_up_axis needs an (N, 3) specific force with N >= 2")
+    m = f.mean(axis=0)
+    norm = float(np.linalg.norm(m))
+    u = m / norm if norm > 0 else np.array([0.0, 0.0, 1.0])
+    bm = _block_means(f, min(blocks, len(f)))
+    if bm is not None:
+        scatter = float(np.linalg.norm(bm.std(axis=0, ddof=1))) / math.sqrt(len(bm))
+    else:
+        scatter = float(np.linalg.norm(f.std(axis=0))) / math.sqrt(len(f))
+    sigma = math.hypot(scatter, accel_bias_sigma) / max(norm, 1e-9)
+    ang = np.arccos(np.clip(np.abs(u), 0.0, 1.0))    # angle to ±each axis (nearest sign)
+    order = np.argsort(ang)
+    i = int(order[0])
+    s = 1 if u[i] >= 0 else -1
+    margin = 0.5 * float(ang[order[1]] - ang[i])
+    ratio = norm / G0
+    conf = _phi(margin / max(sigma, 1e-12)) if 0.5 < ratio < 1.5 else 0.0
+    return UpAxis(axis_label(i, s), i, s, u, float(ang[i]), float(sigma), float(conf),
+                  float(ratio), int(len(f)))
+
+
+# --------------------------------------------------------------------------- detection: forward
+@dataclass
+class ForwardAxis:
+    """The sensor axis that points forward on a vehicle (:func:`detect_forward_axis`).
+
+    Attributes
+    ----------
+    axis : str
+        Signed sensor axis (``"+x"``, ``"-y"``, …) nearest to the forward direction, among the
+        two axes perpendicular to the up axis.
+    index, sign : int
+    forward_s : (3,) unit vector, the forward direction found, in sensor axes
+    yaw_mount_rad : float
+        Fine yaw of the IMU on the vehicle, rad (the ``yaw`` of ``--imu-mount``): the angle,
+        clockwise seen from above, from the vehicle's forward direction to the chosen axis.
+    sigma_yaw_rad : float
+        1σ of ``yaw_mount_rad`` from the least-squares fit.
+    confidence : float
+        Gaussian probability that the chosen axis is the nearest to forward
+        (``Φ((45° − |yaw|)/σ)``); 0 without enough acceleration or turning to see.
+    along_gain, lateral_gain : float
+        Length of the fitted forward and right vectors (≈ 1 when the specific force and the
+        GNSS accelerations agree in scale).
+    handed : int
+        +1 when the lateral fit says right × forward = up (a right-handed, correctly signed
+        triad), −1 when it says the opposite, 0 when there was no turning to tell.
+    turn_correlation : float
+        Correlation of the GNSS course rate with the gyro rate about −up (≈ +1 when the up
+        axis and the gyro signs are right; NaN without turns).
+    epochs : int
+        GNSS epochs used.
+    """
+
+    axis: str
+    index: int
+    sign: int
+    forward_s: np.ndarray
+    yaw_mount_rad: float
+    sigma_yaw_rad: float
+    confidence: float
+    along_gain: float
+    lateral_gain: float
+    handed: int
+    turn_correlation: float
+    epochs: int
+
+    def to_dict(self) -> dict:
+        return {"axis": self.axis, "yaw_mount_deg": math.degrees(self.yaw_mount_rad),
+                "sigma_yaw_deg": math.degrees(self.sigma_yaw_rad), "confidence": self.confidence,
+                "along_gain": self.along_gain, "lateral_gain": self.lateral_gain,
+                "handed": self.handed, "turn_correlation": self.turn_correlation,
+                "epochs": self.epochs}
+
+
+def gnss_velocity_n(gnss: GnssData) -> tuple[np.ndarray, np.ndarray]:
+    """ENU velocity of a GNSS record: its own where given, else central differences of the
+    positions over ±1 s (at the fix times; the ends one-sided). Returns ``(t, velocity_n)``."""
+    t = np.asarray(gnss.t, dtype=float)
+    if gnss.velocity_n is not None and np.all(np.isfinite(gnss.velocity_n[:, :2])):
+        v = np.array(gnss.velocity_n, dtype=float)
+        v[:, 2] = np.where(np.isfinite(v[:, 2]), v[:, 2], 0.0)
+        return t, v
+    r_phi, r_lam = radii(gnss.lat, gnss.h)
+    lon = np.unwrap(gnss.lon)
+    p = np.column_stack([(lon - lon[0]) * r_lam * np.cos(gnss.lat), (gnss.lat - gnss.lat[0]) * r_phi,
+                         gnss.h - gnss.h[0]])
+    # central differences over ±1 s (at least one fix each side): the noise of a difference
+    # of positions falls with its span
+    m = max(1, int(round(1.0 / max(float(np.median(np.diff(t))), 1e-6)))) if len(t) > 2 else 1
+    i = np.arange(len(t))
+    a, b = np.clip(i - m, 0, len(t) - 1), np.clip(i + m, 0, len(t) - 1)
+    span = np.where(t[b] > t[a], t[b] - t[a], np.nan)
+    v = (p[b] - p[a]) / span[:, None]
+    return t, v
+
+
+def _interval_means(t_imu, x, t0, t1):
+    """Mean of IMU rows (interval means ending at ``t_imu``) over ``[t0, t1]`` (cumulative sums,
+    row granularity)."""
+    c = np.concatenate([np.zeros((1, x.shape[1])), np.cumsum(x, axis=0)])
+    i0 = np.searchsorted(t_imu, t0, side="right")
+    i1 = np.searchsorted(t_imu, t1, side="right")
+    n = np.maximum(i1 - i0, 1)
+    return (c[i1] - c[i0]) / n[:, None], i1 - i0
+
+
+def detect_forward_axis(imu: ImuData, gnss: GnssData, *, up: UpAxis | None = None,
+                        min_speed: float = 1.0, span_s: float | None = None) -> ForwardAxis:
+    """The forward axis of a sensor on a vehicle, from its horizontal specific force against the
+    acceleration of the GNSS velocity.
+
+    On a vehicle that does not slip sideways the horizontal specific force is, in the plane
+    perpendicular to up, ``f_h = (a_along + g sin γ) F + a_lat R + c``: the along-track
+    acceleration (the derivative of the GNSS speed, plus gravity along a climb of angle γ)
+    along the forward direction ``F``, the lateral acceleration ``v · dχ/dt`` (χ the course)
+    along the right direction ``R``, and a constant ``c`` (accelerometer bias and a tilt of the
+    mounting). Both are averaged over ``span_s`` around each GNSS epoch on both sides (the IMU
+    rows by their interval means), and ``F``, ``R``, ``c`` are fitted by least squares over the
+    epochs faster than ``min_speed`` — as a *reverse* regression, ``a_along = F·(f_h − c)``
+    and ``a_lat = R·(f_h − c)``, so that the noise of the differenced GNSS velocity sits in the
+    responses and does not shrink the fit. The forward axis is the sensor axis nearest to ``F``; the
+    fine yaw mounting angle is the angle between them, its σ from the fit's covariance with
+    the residual variance.
+
+    Parameters
+    ----------
+    imu : ImuData
+        In the sensor's own axes (a reader given ``axes="detect"``).
+    gnss : GnssData
+        On the IMU's time base; velocity used where given, else from the positions.
+    up : UpAxis, optional
+        Default: :func:`detect_up_axis` of the IMU rows that overlap the GNSS span.
+    min_speed : m/s
+    span_s : s, averaging window (≥ 2 GNSS intervals); default 1 s with the receiver's
+        velocity, 4 s with a velocity differenced from positions (twice differenced noise)
+
+    Returns
+    -------
+    ForwardAxis
+    """
+    t_imu = np.asarray(imu.t, dtype=float)
+    tg, vg = gnss_velocity_n(gnss)
+    if span_s is None:
+        span_s = 1.0 if gnss.velocity_n is not None else 4.0
+    keep = (tg >= t_imu[0]) & (tg <= t_imu[-1])
+    tg, vg = tg[keep], vg[keep]
+    if up is None:
+        m = (t_imu >= (tg[0] if len(tg) else t_imu[0])) & (t_imu <= (tg[-1] if len(tg) else t_imu[-1]))
+        up = detect_up_axis(imu.f_ib_b[m] if m.sum() > 10 else imu.f_ib_b)
+    u = np.asarray(up.up_s, dtype=float)
+    empty = ForwardAxis("?", -1, 0, np.full(3, np.nan), float("nan"), float("nan"), 0.0,
+                        float("nan"), float("nan"), 0, float("nan"), 0)
+    if len(tg) < 5:
+        return empty
+    dtg = float(np.median(np.diff(tg)))
+    half = max(0.5 * span_s, dtg)
+    k = max(1, int(round(half / dtg)))
+    # GNSS: speed, course, their rates over ±k epochs
+    sp = np.hypot(vg[:, 0], vg[:, 1])
+    chi = np.unwrap(np.arctan2(vg[:, 0], vg[:, 1]))
+    i = np.arange(k, len(tg) - k)
+    t0, t1 = tg[i - k], tg[i + k]
+    a_al = (sp[i + k] - sp[i - k]) / (t1 - t0)
+    chi_rate = (chi[i + k] - chi[i - k]) / (t1 - t0)
+    s_mid = sp[i]
+    slope = np.where(s_mid > 0.1, vg[i, 2] / np.maximum(np.hypot(s_mid, vg[i, 2]), 1e-9), 0.0)
+    a_al = a_al + G0 * slope
+    a_lat = s_mid * chi_rate
+    # IMU: mean specific force and rate over the same spans
+    f_mean, n_rows = _interval_means(t_imu, np.asarray(imu.f_ib_b, float), t0, t1)
+    w_mean, _ = _interval_means(t_imu, np.asarray(imu.omega_ib_b, float), t0, t1)
+    ok = (n_rows > 0) & (sp[i - k] > min_speed) & (sp[i + k] > min_speed) & (s_mid > min_speed)
+    ok &= np.isfinite(a_al) & np.isfinite(a_lat)
+    # course rate against the gyro about −up (heading clockwise)
+    turn = -(w_mean @ u)
+    corr = float("nan")
+    if ok.sum() > 5 and np.std(chi_rate[ok]) > 1e-3 and np.std(turn[ok]) > 0:
+        corr = float(np.corrcoef(chi_rate[ok], turn[ok])[0, 1])
+    if ok.sum() < 8:
+        return replace(empty, turn_correlation=corr, epochs=int(ok.sum()))
+    # basis of the plane perpendicular to up
+    e1 = np.cross(u, np.eye(3)[int(np.argmin(np.abs(u)))])
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(u, e1)
+    B = np.column_stack([e1, e2])
+    # reverse regression (the GNSS accelerations, the noisy side, as the responses):
+    # a_along = F·(f_p − c), a_lat = R·(f_p − c), unbiased however noisy the GNSS
+    fp = f_mean[ok] @ B                                 # (M, 2) in the plane
+    X = np.column_stack([fp, np.ones(len(fp))])
+    Y = np.column_stack([a_al[ok], a_lat[ok]])
+    XtX = X.T @ X
+    try:
+        XtX_inv = np.linalg.inv(XtX)
+    except np.linalg.LinAlgError:
+        return replace(empty, turn_correlation=corr, epochs=int(ok.sum()))
+    coef = XtX_inv @ X.T @ Y                            # columns: along, lateral
+    res = Y - X @ coef
+    dof = max(len(Y) - 3, 1)
+    s2 = np.sum(res ** 2, axis=0) / dof                 # per response
+    # each epoch's span overlaps its 2k neighbours': the residuals are correlated over 2k
+    # epochs, so the least-squares covariance is inflated by 2k (fewer independent epochs)
+    infl2 = 2.0 * k
+    Fp, Rp = coef[:2, 0], coef[:2, 1]
+    gain_f = float(np.linalg.norm(Fp))
+    gain_r = float(np.linalg.norm(Rp))
+    if not gain_f > 0:
+        return replace(empty, turn_correlation=corr, epochs=int(ok.sum()))
+    cov_f = infl2 * s2[0] * XtX_inv[:2, :2]
+    cov_r = infl2 * s2[1] * XtX_inv[:2, :2]
+    nf = Fp / gain_f
+    perp = np.array([-nf[1], nf[0]])
+    sig_perp = math.sqrt(float(perp @ cov_f @ perp)) / gain_f
+    sig_gain = math.sqrt(float(nf @ cov_f @ nf))
+    F = B @ nf
+    handed = 0
+    if gain_r > 0:
+        nr = Rp / gain_r
+        if gain_r > 3.0 * math.sqrt(float(nr @ cov_r @ nr)):
+            R3 = B @ nr
+            handed = 1 if float(np.cross(R3, F) @ u) > 0 else -1
+    # nearest sensor axis to F among those perpendicular to up
+    cand = [j for j in range(3) if j != up.index]
+    best = max(cand, key=lambda j: abs(F[j]))
+    sgn = 1 if F[best] >= 0 else -1
+    a_vec = np.zeros(3)
+    a_vec[best] = sgn
+    a_vec -= (a_vec @ u) * u
+    a_vec /= np.linalg.norm(a_vec)
+    # yaw: from the vehicle's forward F to the IMU axis, clockwise seen from above (about −u)
+    yaw = float(math.atan2(-(np.cross(F, a_vec) @ u), float(F @ a_vec)))
+    conf = _phi((math.pi / 4 - abs(yaw)) / max(sig_perp, 1e-12))
+    if gain_f < 3.0 * sig_gain:
+        conf = 0.0                                      # no along-track acceleration to see
+    return ForwardAxis(axis_label(best, sgn), best, sgn, F, yaw, float(sig_perp), float(conf),
+                       gain_f, gain_r, handed, corr, int(ok.sum()))
+
+
+# --------------------------------------------------------------------------- detected frames
+def frame_from_detection(up: UpAxis, forward: ForwardAxis | None = None, *,
+                         yaw: bool = True) -> ImuFrame:
+    """The :class:`ImuFrame` of what was detected: the up axis ``U``, the forward axis ``F``
+    and the third axis by the right-hand rule; with ``yaw`` the fine yaw mounting angle.
+
+    Without a forward axis (``None`` or no confidence) the sensor axis after the up axis in the
+    cyclic order x → y → z is taken as forward (the heading is then the navigator's business:
+    a mounting yaw of 90° only turns the heading).
+    """
+    if up.index < 0:
+        raise AxesError("no up axis detected")
+    U = np.zeros(3)
+    U[up.index] = up.sign
+    if forward is not None and forward.index >= 0 and forward.index != up.index:
+        Fv = np.zeros(3)
+        Fv[forward.index] = forward.sign
+        yaw_deg = math.degrees(forward.yaw_mount_rad) if yaw else 0.0
+    else:
+        Fv = np.zeros(3)
+        Fv[(up.index + 1) % 3] = 1.0
+        yaw_deg = 0.0
+    Rv = np.cross(Fv, U)                 # R × F = U  ⇔  R = F × U
+    # P maps sensor → RFU: rows are the sensor-axis coordinates of R, F, U
+    P = np.vstack([Rv, Fv, U])
+    return ImuFrame(axes_from_matrix(P), (0.0, 0.0, yaw_deg), "", "detected")
+
+
+def compare_frames(given: ImuFrame, detected: ImuFrame, *, yaw_tolerance_deg: float = 10.0,
+                   up: UpAxis | None = None, forward: ForwardAxis | None = None) -> str | None:
+    """One line when a given frame disagrees with a detected one (None when they agree).
+
+    The up axes are compared when ``up`` is confident (≥ 0.99); forward when ``forward`` is;
+    the yaw mounting when its difference exceeds both ``yaw_tolerance_deg`` and 3σ.
+    """
+    Pg, Pd = given.axes.matrix, detected.axes.matrix
+    msgs = []
+    if up is None or up.confidence >= 0.99:
+        if not np.array_equal(Pg[2], Pd[2]):
+            msgs.append(f"up is sensor axis {_axis_of(Pd[2])} by gravity, not "
+                        f"{_axis_of(Pg[2])}")
+    if forward is not None and forward.confidence >= 0.99:
+        if not np.array_equal(Pg[1], Pd[1]):
+            msgs.append(f"forward is sensor axis {_axis_of(Pd[1])} by the GNSS accelerations, "
+                        f"not {_axis_of(Pg[1])}")
+        elif abs(given.mount_deg[2] - detected.mount_deg[2]) > max(
+                yaw_tolerance_deg, 3 * math.degrees(forward.sigma_yaw_rad)):
+            msgs.append(f"yaw mounting {detected.mount_deg[2]:.1f}° ± "
+                        f"{math.degrees(forward.sigma_yaw_rad):.1f}° by the GNSS accelerations, "
+                        f"not {given.mount_deg[2]:g}°")
+    if not msgs:
+        return None
+    return (f"IMU {given.describe()} disagrees with the data: " + "; ".join(msgs)
+            + f" (detected axes {detected.axes.letters})")
+
+
+def _axis_of(row) -> str:
+    j = int(np.flatnonzero(row)[0])
+    return axis_label(j, int(row[j]))
+
+
+__all__ = ["ForwardAxis", "UpAxis", "compare_frames", "detect_forward_axis", "detect_up_axis",
+           "frame_from_detection", "gnss_velocity_n"]

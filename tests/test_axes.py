@@ -1,0 +1,170 @@
+"""IMU axes and mounting as data (issue 20 item 2): the notation, scipy as the rotation oracle,
+exact round trips through files in any convention, and detection of the axes from the data."""
+import math
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from selfnav import attitude as att
+from selfnav import axes as A
+from selfnav import axes_detect as D
+from selfnav.io.readers import read_imu
+from selfnav.sim.scenarios import simulate, write_simulation
+
+#: six right-handed conventions, in both spellings
+CONVENTIONS = ("RFU", "FRD", "FLU", "BRU", "x=-U,y=F,z=R", "LBU")
+
+
+@pytest.mark.parametrize("spec,letters,matrix", [
+    ("RFU", "RFU", np.eye(3)),
+    ("frd", "FRD", [[0, 1, 0], [1, 0, 0], [0, 0, -1]]),
+    ("NED", "FRD", [[0, 1, 0], [1, 0, 0], [0, 0, -1]]),      # "NED body" = FRD
+    ("ENU", "RFU", np.eye(3)),
+    ("FLU", "FLU", [[0, -1, 0], [1, 0, 0], [0, 0, 1]]),
+    ("x=-F,y=R,z=U", "BRU", [[0, 1, 0], [-1, 0, 0], [0, 0, 1]]),   # the rtklibexplorer logger
+    ("x=B, y=R, z=U", "BRU", [[0, 1, 0], [-1, 0, 0], [0, 0, 1]]),
+    ("x=-U,y=F,z=R", "DFR", [[0, 0, 1], [0, 1, 0], [-1, 0, 0]]),
+])
+def test_parse_axes(spec, letters, matrix):
+    ax = A.parse_axes(spec)
+    assert ax.letters == letters
+    np.testing.assert_array_equal(ax.matrix, np.asarray(matrix, float))
+    assert np.linalg.det(ax.matrix) == pytest.approx(1.0)
+    assert A.parse_axes(ax.assignments()) == ax
+    assert A.axes_from_matrix(ax.matrix) == ax
+
+
+@pytest.mark.parametrize("spec,needle", [
+    ("FRU", "left-handed (x × y = −z), which no IMU is: did you mean FRD?"),
+    ("FFU", "x and y both point F"),
+    ("FBU", "x=F and y=B lie along the same line"),
+    ("FRX", "'X' is not a direction"),
+    ("FR", "give three directions"),
+    ("x=F,y=R", "z not given (the right-hand rule makes it z=D: write x=F,y=R,z=D)"),
+    ("x=F,x=R,z=U", "x is given twice"),
+    ("", "empty spec"),
+])
+def test_impossible_or_ambiguous_specs_are_one_line(spec, needle):
+    with pytest.raises(A.AxesError) as e:
+        A.parse_axes(spec)
+    assert needle in str(e.value) and "\n" not in str(e.value)
+
+
+def test_mount_convention_against_scipy_and_design():
+    rng = np.random.default_rng(3)
+    for _ in range(20):
+        r, p, y = rng.uniform(-1, 1, 3) * np.array([np.pi, np.pi / 2, np.pi])
+        M = A.mount_matrix(r, p, y)
+        # scipy: C_imu^v = Rotation.from_euler('ZXY', [-yaw, pitch, roll]) (intrinsic)
+        np.testing.assert_allclose(M, Rotation.from_euler("ZXY", [-y, p, r]).as_matrix(),
+                                   atol=1e-15)
+        # the same matrix as DESIGN §2's C_b^n with the vehicle in ENU's place
+        np.testing.assert_allclose(M, att.dcm_bn_from_euler(r, p, y), atol=1e-15)
+        np.testing.assert_allclose(A.mount_angles(M), (r, p, y), atol=1e-12)
+    # yaw +5° clockwise: the vehicle's forward axis, seen in the IMU frame, is 5° to its left
+    fwd_in_imu = A.mount_matrix(0, 0, np.radians(5.0)).T @ [0, 1, 0]
+    assert fwd_in_imu[0] == pytest.approx(-np.sin(np.radians(5.0)))
+    assert A.parse_mount("0,-6.79,5.35") == (0.0, -6.79, 5.35)
+    for bad in ("1,2", "a,b,c", "0,95,0", "0,nan,0"):
+        with pytest.raises(A.AxesError):
+            A.parse_mount(bad)
+
+
+def test_presets_and_frames():
+    f = A.imu_frame("rtklibexplorer-drive0708")
+    assert f.axes.letters == "BRU" and f.mount_deg == (0.0, -6.79, 5.35) and f.source == "preset"
+    g = A.imu_frame("rtklibexplorer-drive0708", "0,0,1")
+    assert g.mount_deg == (0.0, 0.0, 1.0) and g.axes.letters == "BRU"
+    assert A.imu_frame("detect") == A.DETECT
+    with pytest.raises(A.AxesError):
+        A.imu_frame("detect", "0,0,1")
+    for name, p in A.PRESETS.items():
+        assert A.parse_axes(p.axes) and p.description
+
+
+@pytest.fixture(scope="module")
+def drive():
+    """A 4-minute simulated car drive; GNSS σ 1 m at 5 Hz with velocity, no outliers."""
+    return simulate({"scenario": {"kind": "car", "duration": 240.0},
+                     "gnss": {"sigma_m": 1.0, "rate_hz": 5.0, "outliers": [],
+                              "spike_rate": 0.0}}, seed=2)
+
+
+@pytest.mark.parametrize("spec", CONVENTIONS)
+def test_drive_written_in_any_axes_reads_back_identical(drive, spec, tmp_path):
+    """The same simulated drive written in six axis conventions, read back with --imu-axes:
+    the same ImuData (rates, specific force, magnetometer) to 1e-12 — exactly, in fact: a
+    signed permutation writes the same digits."""
+    write_simulation(drive, tmp_path / "rfu")
+    write_simulation(drive, tmp_path / "x", imu_axes=spec)
+    ref = read_imu(tmp_path / "rfu" / "imu.csv")
+    raw = read_imu(tmp_path / "x" / "imu.csv")
+    got = read_imu(tmp_path / "x" / "imu.csv", axes=spec)
+    assert got.meta["axes"] == A.parse_axes(spec).letters and got.meta["axes_source"] == "given"
+    for a, b in ((ref.omega_ib_b, got.omega_ib_b), (ref.f_ib_b, got.f_ib_b),
+                 (ref.mag_b, got.mag_b)):
+        np.testing.assert_allclose(b, a, rtol=0, atol=1e-12)
+    if spec != "RFU":
+        assert np.abs(raw.f_ib_b - ref.f_ib_b).max() > 1.0      # not read right without it
+    note = (tmp_path / "x" / "imu.csv").read_text().splitlines()[1]
+    assert ("--imu-axes" in note) == (spec != "RFU")
+
+
+def test_mount_round_trip_in_memory(drive):
+    fr = A.imu_frame("FRD", "1.5,-2,7")
+    back = A.to_vehicle(A.from_vehicle(drive.imu, fr), fr)
+    np.testing.assert_allclose(back.f_ib_b, drive.imu.f_ib_b, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(back.omega_ib_b, drive.imu.omega_ib_b, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(back.mag_b, drive.imu.mag_b, rtol=0, atol=1e-9)
+
+
+@pytest.mark.parametrize("spec", CONVENTIONS)
+@pytest.mark.parametrize("yaw_deg", [0.0, 4.0])
+def test_detected_axes_match_without_imu_axes(drive, spec, yaw_deg):
+    """Without --imu-axes the detection finds the convention: up from gravity on the first
+    30 s, forward from the GNSS accelerations, the fine yaw mounting within 3σ."""
+    fr = A.imu_frame(spec, (0.0, 0.0, yaw_deg))
+    raw = A.from_vehicle(drive.imu, fr)
+    first = raw.t < raw.t[0] + 30.0
+    up = D.detect_up_axis(raw.f_ib_b[first])
+    assert up.confidence > 0.999 and up.tilt_rad < math.radians(3)
+    fw = D.detect_forward_axis(raw, drive.gnss.as_gnss(velocity=True), up=up)
+    assert fw.confidence > 0.999 and fw.handed == 1 and fw.turn_correlation > 0.9
+    assert abs(fw.yaw_mount_rad - math.radians(yaw_deg)) < 3 * fw.sigma_yaw_rad
+    assert fw.sigma_yaw_rad < math.radians(2.0)
+    det = D.frame_from_detection(up, fw)
+    assert det.axes == fr.axes
+    # read with the detected frame, the drive is the vehicle's again (to the yaw's σ)
+    back = A.to_vehicle(raw, det)
+    err = att.dcm_to_rotvec(A.mount_matrix(0, 0, math.radians(det.mount_deg[2])) @
+                            A.mount_matrix(0, 0, math.radians(yaw_deg)).T)
+    assert np.linalg.norm(err) < 3 * fw.sigma_yaw_rad
+    assert np.abs(back.f_ib_b.mean(axis=0)[2] - drive.imu.f_ib_b.mean(axis=0)[2]) < 0.01
+    # what was given and what was detected: one line when they disagree, None when not
+    assert D.compare_frames(fr, det, up=up, forward=fw) is None
+    wrong = A.imu_frame("RFU" if spec != "RFU" else "FRD")
+    msg = D.compare_frames(wrong, det, up=up, forward=fw)
+    assert msg and "disagrees with the data" in msg and "\n" not in msg
+
+
+def test_forward_from_positions_only_is_honest(drive):
+    """Without the receiver's velocity (10 m σ at 1 Hz) the forward axis is not claimed."""
+    noisy = simulate({"scenario": {"kind": "car", "duration": 240.0}}, seed=2)
+    fw = D.detect_forward_axis(noisy.imu, noisy.gnss.as_gnss())
+    assert fw.confidence < 0.9
+    # 1 m at 5 Hz positions: the axis is right and its σ says how well it is known
+    fw = D.detect_forward_axis(drive.imu, drive.gnss.as_gnss())
+    assert fw.axis == "+y" and abs(fw.yaw_mount_rad) < 3 * fw.sigma_yaw_rad
+
+
+def test_up_axis_confidence_falls_near_45_degrees():
+    f = np.tile([0.0, 9.81 * np.sin(np.radians(44.0)), 9.81 * np.cos(np.radians(44.0))],
+                (3000, 1))
+    f += np.random.default_rng(1).normal(size=f.shape) * 0.05
+    up = D.detect_up_axis(f)
+    assert up.axis == "+z" and 0.5 < up.confidence < 0.99
+    up = D.detect_up_axis(f[:, [2, 0, 1]] * [-1, 1, 1])         # up along −x, level
+    up = D.detect_up_axis(np.tile([-9.81, 0.1, 0.0], (100, 1)))
+    assert up.axis == "-x" and up.confidence > 0.999
+    assert D.detect_up_axis(np.tile([0.5, 0.0, 0.2], (100, 1))).confidence == 0.0   # not gravity

@@ -1,0 +1,94 @@
+"""The rtklibexplorer logger (issue 20 items 2 and 4): its mounting is a preset, not the reader's;
+partial first and last lines are skipped with one warning; bad lines are one line in selfnav's
+words."""
+import shutil
+import warnings
+
+import numpy as np
+import pytest
+
+from selfnav import axes_detect as D
+from selfnav.errors import InputError, SelfnavWarning
+from selfnav.io import rtklibexplorer
+from selfnav.io.readers import read_imu
+
+
+@pytest.fixture(scope="module")
+def drive(shared_data):
+    return shared_data / "rtklibexplorer_drive_0708"
+
+
+def _copy(drive, tmp_path, text=None):
+    dst = tmp_path / "imu_1934.csv"
+    if text is None:
+        shutil.copy(drive / "imu_1934.csv", dst)
+    else:
+        dst.write_text(text)
+    shutil.copy(drive / "imu_1934.csv.tag", tmp_path / "imu_1934.csv.tag")
+    return dst
+
+
+def test_default_is_the_drive0708_preset_as_before(drive):
+    """Until the navigator detects axes, the default reading is the documented preset, and it
+    is the reading of the old hard-coded reader, bit for bit: x_R = y, y_F = −x, z_U = z,
+    then the mounting Rz(−5.35°)·Rx(−6.79°) (upstream's imu_misalign)."""
+    assert rtklibexplorer.DEFAULT_AXES == "rtklibexplorer-drive0708"
+    imu = read_imu(drive / "imu_1934.csv")
+    assert imu.meta["axes"] == "BRU" and imu.meta["mount_deg"] == (0.0, -6.79, 5.35)
+    assert imu.meta["axes_preset"] == "rtklibexplorer-drive0708"
+    raw = rtklibexplorer.read_rtklibexplorer_imu(drive / "imu_1934.csv")
+    from selfnav import attitude as att
+
+    P = np.array([[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+    R = att.rotvec_to_dcm(np.array([0, 0, np.radians(-5.35)])) @ att.rotvec_to_dcm(
+        np.array([np.radians(-6.79), 0, 0]))
+    np.testing.assert_array_equal(imu.f_ib_b, (raw.f_ib_b @ P.T) @ R.T)
+    np.testing.assert_array_equal(imu.omega_ib_b, (raw.omega_ib_b @ P.T) @ R.T)
+    # the README's check: levelled at rest about (0.19, 0.00, 9.93) m/s²
+    f0 = imu.f_ib_b[:300].mean(axis=0)
+    assert abs(f0[1]) < 0.1 and f0[2] == pytest.approx(9.93, abs=0.05)
+    # the same by name, and another installation of the same logger by its own spec
+    same = read_imu(drive / "imu_1934.csv", axes="rtklibexplorer-drive0708")
+    np.testing.assert_array_equal(same.f_ib_b, imu.f_ib_b)
+    other = read_imu(drive / "imu_1934.csv", axes="x=-F,y=R,z=U")
+    np.testing.assert_array_equal(other.f_ib_b, raw.f_ib_b @ P.T)
+    det = read_imu(drive / "imu_1934.csv", axes="detect")
+    np.testing.assert_array_equal(det.f_ib_b, raw.f_ib_b)
+    assert det.meta["axes_source"] == "detect"
+
+
+def test_up_axis_of_the_raw_logger_is_detected(drive):
+    raw = read_imu(drive / "imu_1934.csv", axes="detect")
+    up = D.detect_up_axis(raw.f_ib_b[raw.t < raw.t[0] + 30])
+    assert up.axis == "+z" and up.confidence > 0.999
+
+
+def test_partial_first_and_last_lines_one_warning(drive, tmp_path):
+    lines = (drive / "imu_1934.csv").read_text().splitlines()
+    full = read_imu(_copy(drive, tmp_path))
+    # the logger's partial first line (6 of 7 fields) and a last line cut mid-number
+    lines[0] = lines[0].split(",", 1)[1]
+    lines[-1] = lines[-1][:9]
+    p = _copy(drive, tmp_path, "\n".join(lines))
+    with warnings.catch_warnings(record=True) as w:
+        warnings.simplefilter("always")
+        imu = read_imu(p)
+    mine = [str(x.message) for x in w if issubclass(x.category, SelfnavWarning)]
+    assert len(mine) == 1 and "first line (1) and last line" in mine[0] and "partial" in mine[0]
+    np.testing.assert_array_equal(imu.f_ib_b, full.f_ib_b)     # as upstream: rows 2..N-1
+
+
+@pytest.mark.parametrize("edit,needle", [
+    (lambda ln: ln[:500] + ["0.1,0.2,0.3"] + ln[501:], "line 501: has 3 fields where an "
+     "rtklibexplorer IMU log has 7"),
+    (lambda ln: ln[:700] + ["0.1,0.2,x,1,2,3,999"] + ln[701:], "line 701, column 'az': value "
+     "'x' is not a number"),
+    (lambda ln: ln[:5], "has 5 lines"),
+])
+def test_bad_lines_are_one_line_in_selfnav_words(drive, tmp_path, edit, needle):
+    lines = (drive / "imu_1934.csv").read_text().splitlines()
+    p = _copy(drive, tmp_path, "\n".join(edit(lines)))
+    with pytest.raises(InputError) as e:
+        read_imu(p)
+    msg = str(e.value)
+    assert needle in msg and "usecols" not in msg and "\n" not in msg
