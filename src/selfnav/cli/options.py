@@ -11,6 +11,7 @@ scipy); ``tests/test_cli_options.py`` checks that they equal the library's
 """
 from __future__ import annotations
 
+import os
 from pathlib import Path
 from typing import Annotated, Callable, Optional
 
@@ -104,11 +105,25 @@ Json = Annotated[bool, typer.Option(
     "--json", help="Print one JSON object on stdout (nothing else there; notes go to stderr).")]
 
 
+def file_path(value) -> Path:
+    """An output FILE name as typed: one ending in ``/`` names a folder and is refused in one
+    line (``Path`` would drop the slash and write a file named like the folder)."""
+    if isinstance(value, Path):
+        return value
+    text = str(value)
+    if text.endswith(("/", os.sep)) or Path(text).name in ("", ".", ".."):
+        base = text.rstrip("/" + os.sep) or "."
+        raise typer.BadParameter(f"'{text}' names a folder (it ends in '/'): give a file name, "
+                                 f"e.g. {base}/solution.csv")
+    return Path(text)
+
+
 def out_file(what: str, required: bool = True):
     """``--out FILE``: the help says what the file holds and how it is written."""
     return Annotated[Path if required else Optional[Path], typer.Option(
-        "--out", help=f"{what} A FILE, written atomically (through a symlink, never over a "
-                      "device); missing parent folders are created.")]
+        "--out", parser=file_path, metavar="FILE",
+        help=f"{what} A FILE, written atomically (through a symlink, never over a "
+             "device); missing parent folders are created.")]
 
 
 def out_folder(what: str):
