@@ -39,8 +39,9 @@ COLUMN_DOCS = {
     "sigma_e_m": "1σ of the position East, m", "sigma_n_m": "1σ of the position North, m",
     "sigma_u_m": "1σ of the position Up, m",
     "sigma_h_m": "horizontal 1σ, m (root sum of the East and North variances)",
-    "gnss": "status of the latest GNSS fix at this row: used, used-h, used-v, degraded, "
-            "rejected, before-init, none (no fix yet)",
+    "gnss": "status of the latest GNSS fix (within 2 s) at this row: used, used-h (height "
+            "rejected), used-v (height only), degraded (σ inflated), suspect, rejected, "
+            "before-init, none (no fix in the last 2 s)",
     "cross_m": "distance from the fix to its matched road position, m",
     "way_id": "OpenStreetMap way matched", "matched": "1 if a road lies within the search radius",
     "sigma_lat_deg": "1σ of the latitude, deg", "sigma_lon_deg": "1σ of the longitude, deg",
