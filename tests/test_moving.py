@@ -240,9 +240,10 @@ def test_cli_json_and_solution(tmp_path, capsys):
     js = json.loads(capsys.readouterr().out)
     assert js["latitude_end_deg"] == pytest.approx(np.degrees(tr.lat[-1]), abs=0.005)
     text = out.read_text().splitlines()
-    assert text[0].startswith("# simulated")
-    assert "attitude time offset" in text[2] and "IMU rows: instantaneous" in text[2]
-    assert text[4] == "t,lat_deg,lon_deg,sigma_lat_deg,sigma_lon_deg"
+    assert text[0] == "t,lat_deg,lon_deg,sigma_lat_deg,sigma_lon_deg"   # pandas reads it as is
+    notes = json.loads((tmp_path / "sol.csv.json").read_text())["notes"]
+    assert notes[0].startswith("simulated")
+    assert "attitude time offset" in notes[2] and "IMU rows: instantaneous" in notes[2]
 
 
 @pytest.mark.parametrize("case,needle", [
