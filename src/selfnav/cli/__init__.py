@@ -23,6 +23,7 @@ import threading
 import warnings
 
 import typer
+import typer.core
 
 from selfnav.errors import Interrupted, SelfnavError, SelfnavWarning, interrupt_requested
 
@@ -52,10 +53,14 @@ def _root(version: bool = typer.Option(False, "--version", callback=_version, is
 
 def _register_all() -> None:
     import selfnav.cli as pkg
+    from selfnav.cli.options import GroupedCommand
 
     for mod in sorted(pkgutil.iter_modules(pkg.__path__), key=lambda m: m.name):
         if mod.name.startswith("cmd_"):
             importlib.import_module(f"selfnav.cli.{mod.name}").register(app)
+    for info in app.registered_commands:   # --help in panels (options.HELP_PANELS)
+        if info.cls is None or info.cls is typer.core.TyperCommand:
+            info.cls = GroupedCommand
 
 
 _register_all()
