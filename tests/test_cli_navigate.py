@@ -181,6 +181,8 @@ def _umask():
     return umask()
 
 
+@pytest.mark.filterwarnings("ignore:.*lie outside the truth's time span:selfnav.errors.SelfnavWarning")  # expected here
+@pytest.mark.filterwarnings("ignore:.*covers .* of the truth's time span:selfnav.errors.SelfnavWarning")  # expected here
 @pytest.mark.slow
 def test_real_drive_60s_imu_gap_reinitialises(tmp_path, capsys, shared_data):
     """Issue 12 acceptance: 60 s of IMU rows cut from the real drive (RTK as truth): error at

@@ -13,6 +13,9 @@ from hypothesis import strategies as st
 from selfnav.cli import main
 from selfnav.errors import SelfnavError
 
+#: mutated files are meant to draw warnings; these tests check only that nothing crashes
+pytestmark = pytest.mark.filterwarnings("ignore::selfnav.errors.SelfnavWarning")
+
 SETTINGS = dict(deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture,
                                                       HealthCheck.too_slow])
 VALUES = ["", "nan", "inf", "-inf", "abc", "1e400", "0x10", " ", "NaN", "--", "1,2", "٣", "1e-320",

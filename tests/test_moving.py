@@ -303,6 +303,7 @@ def test_heading_wraparound_handled(tmp_path):
 
 
 # ----------------------------------------------------------------------------- real data
+@pytest.mark.filterwarnings("ignore:.*disturbed rest:selfnav.errors.SelfnavWarning")  # expected here
 def test_real_static_xian_agrees_with_static_method(shared_data):
     from selfnav.io.readers import read_imu
     from selfnav.latitude import estimate_latitude

@@ -96,6 +96,7 @@ def test_outages_every_two_minutes(drive):
         assert max(at_end) <= bound, (smooth, at_end)
 
 
+@pytest.mark.filterwarnings("ignore:.*of the GNSS fixes were not used:selfnav.errors.SelfnavWarning")  # expected here
 @pytest.mark.parametrize("kind", ["white", "drift"])
 def test_outliers_positions_only(drive, kind):
     """3 minutes of unflagged 200 m σ outliers and no GNSS velocity (positions only): inside

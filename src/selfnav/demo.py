@@ -41,7 +41,7 @@ def window_estimates(imu, window_s: float = 300.0):
     return np.array(out)
 
 
-def navigation_demo(duration: float = 420.0, seeds=(1, 2, 3)) -> dict:
+def navigation_demo(duration: float = 420.0, seeds=(1, 2, 3), progress=None) -> dict:
     """*Simulated* drives on the shipped Karhula map (ODbL) in seed 004's case — a consumer MEMS
     IMU and 3 minutes of unflagged 200 m σ white outliers: EKF with the window test, the plain
     χ² gate (which lets outliers in once P has grown), and EKF + map.
@@ -66,13 +66,15 @@ def navigation_demo(duration: float = 420.0, seeds=(1, 2, 3)) -> dict:
     mx = {n: 0.0 for n, _, _ in names}
     first = None
     first_m, first_err = {}, {}
-    for seed in seeds:
+    for k_seed, seed in enumerate(seeds):
         sim = simulate(spec, seed=seed)
         graph = read_roads(sim.map_path)
         g = sim.gnss
         gd = g.as_gnss(source="simulated")
         tracks = {}
-        for name, robust, road in names:
+        for k_name, (name, robust, road) in enumerate(names):
+            if progress is not None:
+                progress((k_seed * len(names) + k_name) / (len(seeds) * len(names)))
             cfg = ins.FilterConfig.for_grade("consumer", robust=robust)
             res = ins.run_filter(sim.imu, gd, cfg, init=robust_init(sim.imu, gd) if road else None,
                                  road_aid=EkfRoadAid(graph, gd) if road else None)
@@ -120,20 +122,20 @@ def latitude_rows(summary: dict) -> list:
     return out
 
 
-def run_demo(out_dir: Path) -> dict:
+def run_demo(out_dir: Path, progress=None) -> dict:
     """Run the latitude method on the shipped static record and the simulated drives; write
     JSON, plots and ``index.html`` into ``out_dir`` as one set (an interrupt leaves the old
-    report or the new one)."""
+    report or the new one). ``progress(fraction, description)`` is told of each step."""
     from selfnav.io.output import atomic_folder, check_output_folder
 
     check_output_folder(out_dir)
     with warnings.catch_warnings():  # the demo reports its own notes
         warnings.simplefilter("ignore", SelfnavWarning)
         with atomic_folder(out_dir, owned=DEMO_FILES) as tmp:
-            return _write_demo(Path(tmp))
+            return _write_demo(Path(tmp), progress or (lambda fraction, description=None: None))
 
 
-def _write_demo(out_dir: Path) -> dict:
+def _write_demo(out_dir: Path, progress) -> dict:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -142,6 +144,7 @@ def _write_demo(out_dir: Path) -> dict:
     from selfnav.io.readers import read_imu
     from selfnav.latitude import estimate_latitude
 
+    progress(0.0, "latitude of the shipped RLG record")
     imu = read_imu(packaged("lasergyro.imu.gz"), "psins")
     res = {m: estimate_latitude(imu, rest=m).to_dict() for m in ("auto", "still")}
     res["seed"] = estimate_latitude(imu, method="seed").to_dict()
@@ -165,7 +168,9 @@ def _write_demo(out_dir: Path) -> dict:
     fig.tight_layout()
     atomic_write_bytes(out_dir / "latitude_windows.png", figure_png(fig, 110))
     plt.close(fig)
-    nav = navigation_demo()
+    progress(0.1, "simulated drives through outliers (3 drives × 3 filters)")
+    nav = navigation_demo(progress=lambda x: progress(0.1 + 0.85 * x))
+    progress(0.95, "plots and the report")
     fig, ax = plt.subplots(figsize=(7, 7))
     gr = nav["graph"]
     for u, v in zip(gr.seg_u, gr.seg_v):

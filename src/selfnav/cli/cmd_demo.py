@@ -19,7 +19,10 @@ def register(app: typer.Typer) -> None:
         """Latitude from the shipped real RLG recording (Xi'an); report in OUT/index.html."""
         from selfnav.demo import SITE_LAT_DEG, latitude_rows, run_demo
 
-        s = run_demo(out)
+        from selfnav.cli.progress import bar
+
+        with bar("selfnav demo", enabled=not as_json) as update:
+            s = run_demo(out, progress=lambda x, description=None: update(x, description))
         if as_json:
             emit_json(s)
             return
