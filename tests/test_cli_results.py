@@ -123,7 +123,7 @@ def test_other_datum_reads_back_as_wgs84(navigated, tmp_path):
     sk = tmp_path / "sk42.csv"
     sol.to_csv(sk, datum="sk42")
     raw = pd.read_csv(sk)
-    assert abs(raw["lat_deg"][0] - sol.lat_deg[0]) * 111e3 > 5.0      # written in SK-42 (9 m off here)
+    assert abs(raw["lat_deg"][0] - sol.lat_deg[0]) * 111e3 > 5.0  # in SK-42: 9 m off
     back = read_solution(sk)
     assert np.abs(back.lat_deg - sol.lat_deg).max() * 111e3 < 1e-3    # read back to WGS-84
 

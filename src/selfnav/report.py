@@ -124,11 +124,13 @@ METRIC_WORDS = {
     "horizontal_mean_m": ("Horizontal error, mean", "m"),
     "vertical_rms_m": ("Vertical error, RMS", "m"),
     "vertical_max_m": ("Vertical error, largest magnitude", "m"),
-    "east_mean_m": ("East error, mean (bias)", "m"), "north_mean_m": ("North error, mean (bias)", "m"),
+    "east_mean_m": ("East error, mean (bias)", "m"),
+    "north_mean_m": ("North error, mean (bias)", "m"),
     "up_mean_m": ("Up error, mean (bias)", "m"),
     "velocity_horizontal_rms_m_s": ("Horizontal velocity error, RMS", "m/s"),
     "velocity_vertical_rms_m_s": ("Vertical velocity error, RMS", "m/s"),
-    "samples": ("Epochs compared", ""), "duration_s": ("Time from first to last epoch compared", "s"),
+    "samples": ("Epochs compared", ""),
+    "duration_s": ("Time from first to last epoch compared", "s"),
     "solution_samples": ("Epochs in the solution", ""),
     "t_start_s": ("First epoch compared", "s"), "t_end_s": ("Last epoch compared", "s"),
     "coverage": ("Coverage of the truth's time span", "%"),
@@ -143,7 +145,8 @@ METRIC_WORDS = {
 }
 _TRACK = {"along_track": "Along-track error (truth heading)",
           "cross_track": "Cross-track error (truth heading)",
-          "road_along_track": "Along-track error (road)", "road_cross_track": "Cross-track error (road)"}
+          "road_along_track": "Along-track error (road)",
+          "road_cross_track": "Cross-track error (road)"}
 for _k, _words in _TRACK.items():
     METRIC_WORDS[f"{_k}_rms_m"] = (f"{_words}, RMS", "m")
     METRIC_WORDS[f"{_k}_mean_m"] = (f"{_words}, mean", "m")

@@ -35,9 +35,13 @@ def register(app: typer.Typer) -> None:
 
         if report is not None:
             check_output_folder(report)
-        out = api.evaluate_report(truth, solution, roads=map_path, report=report,
-                                  title=f"selfnav evaluate: {solution.name} against "
-                                        f"{truth.name}")
+        from selfnav.cli.progress import bar
+
+        with bar("evaluating" + (" and writing the report" if report is not None else ""),
+                 enabled=not as_json):
+            out = api.evaluate_report(truth, solution, roads=map_path, report=report,
+                                      title=f"selfnav evaluate: {solution.name} against "
+                                            f"{truth.name}")
         if as_json:
             emit_json(out)
             return

@@ -82,8 +82,9 @@ def register(app: typer.Typer) -> None:
                            "with velocity and attitude, PSINS avp CSV) at the IMU start instead "
                            "of aligning from GNSS; then --gnss is optional.")] = None,
         fix_log: Annotated[Optional[Path], typer.Option(
-            "--fix-log", parser=opt.file_path, metavar="FILE", help="Write one row per GNSS fix: t, status, reason, NIS (a FILE, "
-                              "written atomically).")] = None,
+            "--fix-log", parser=opt.file_path, metavar="FILE",
+            help="Write one row per GNSS fix: t, status, reason, NIS (a FILE, written "
+                 "atomically).")] = None,
         window_test: Annotated[bool, typer.Option(
             "--window-test/--no-window-test",
             help="The outlier window test (off: only the χ² gate).")] = True,
