@@ -39,6 +39,7 @@ def test_the_api_is_the_package_face():
     assert set(API) <= set(selfnav.__all__)
 
 
+@pytest.mark.filterwarnings("ignore:.*of the GNSS fixes were not used:selfnav.errors.SelfnavWarning")  # expected here
 def test_navigate_equals_the_command_line(sim, tmp_path, capsys):
     out = tmp_path / "cli.csv"
     code, _, err = run(["navigate", "--imu", sim / "imu.csv", "--gnss", sim / "gnss.csv",

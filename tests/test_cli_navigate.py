@@ -25,7 +25,11 @@ def test_simulate_navigate_evaluate(sim, tmp_path, capsys):
     assert code == 0, err
     d = json.loads(out)
     assert d["method"] == "ekf" and d["accepted"] > 50
-    assert sol.read_text().startswith("# selfnav navigate")
+    # the CSV starts with its header row; what produced it is in the JSON sidecar
+    assert sol.read_text().startswith("t,lat_deg,lon_deg,h_m")
+    side = json.loads((tmp_path / "sol.csv.json").read_text())
+    assert side["notes"][0].startswith("selfnav navigate") and side["datum"] == "wgs84"
+    assert side["stats"]["accepted"] == d["accepted"]
     code, out, err = run(["evaluate", "--truth", sim / "truth.csv", "--solution", sol, "--json"],
                          capsys)
     assert code == 0, err
@@ -177,6 +181,8 @@ def _umask():
     return umask()
 
 
+@pytest.mark.filterwarnings("ignore:.*lie outside the truth's time span:selfnav.errors.SelfnavWarning")  # expected here
+@pytest.mark.filterwarnings("ignore:.*covers .* of the truth's time span:selfnav.errors.SelfnavWarning")  # expected here
 @pytest.mark.slow
 def test_real_drive_60s_imu_gap_reinitialises(tmp_path, capsys, shared_data):
     """Issue 12 acceptance: 60 s of IMU rows cut from the real drive (RTK as truth): error at

@@ -98,6 +98,7 @@ def test_random_errors_against_pyproj_geodesic():
     assert np.allclose(ev.along**2 + ev.cross**2, ev.horizontal**2)
 
 
+@pytest.mark.filterwarnings("ignore:.*covers .* of the truth's time span:selfnav.errors.SelfnavWarning")  # expected here
 def test_time_lag_is_along_track_and_interpolation_is_exact():
     speed, lag = 12.0, 0.25
     t, enu, u, psi = _straight(heading_deg=135.0, speed=speed, T=60.0, dt=1.0)
@@ -147,6 +148,8 @@ def test_road_relative_along_cross():
     assert ev.metrics["road_cross_track_rms_m"] == pytest.approx(2.0, abs=1e-3)
 
 
+@pytest.mark.filterwarnings("ignore:.*lie outside the truth's time span:selfnav.errors.SelfnavWarning")  # expected here
+@pytest.mark.filterwarnings("ignore:.*covers .* of the truth's time span:selfnav.errors.SelfnavWarning")  # expected here
 def test_partial_and_no_overlap():
     t, enu, u, psi = _straight()
     truth = _traj(t, enu, heading=np.full(len(t), psi))

@@ -75,6 +75,9 @@ def test_fine_alignment_sigma_is_consistent_on_noisy_navigation_grade_data():
     assert np.all((rms > 0.5) & (rms < 1.6)), rms
 
 
+@pytest.mark.filterwarnings("ignore:.*disturbed rest:selfnav.errors.SelfnavWarning")  # expected here
+@pytest.mark.filterwarnings("ignore:.*this record hardly determines:selfnav.errors.SelfnavWarning")  # expected here
+@pytest.mark.filterwarnings("ignore:.*off Earth rate:selfnav.errors.SelfnavWarning")  # expected here
 def test_fine_alignment_on_a_rocking_base():
     """0.05° rocking at 3 s plus a tilt drift: the gyros follow it, the σ stays honest."""
     for s in range(4):

@@ -93,6 +93,8 @@ def test_folder_of_files_is_a_fleet_named_by_file(tmp_path):
     assert fleet.time_form == "seconds" and not fleet.has_track_id
 
 
+@pytest.mark.filterwarnings("ignore:.*columns read as the schema's:selfnav.errors.SelfnavWarning")  # expected here
+@pytest.mark.filterwarnings("ignore:.*rows out of time order:selfnav.errors.SelfnavWarning")  # expected here
 def test_parquet_with_timestamp_column(tmp_path):
     pa = pytest.importorskip("pyarrow")
     import pyarrow.parquet as pq
@@ -130,6 +132,7 @@ def test_native_gnss_csv_takes_iso_times_repeats_and_unsorted_rows(tmp_path):
         read_gnss_csv(two)
 
 
+@pytest.mark.filterwarnings("ignore:.*columns read as the schema's:selfnav.errors.SelfnavWarning")  # expected here
 def test_common_spellings_and_a_row_id_column(tmp_path):
     p = _write(tmp_path / "grab.csv", "id,trj_id,pingtimestamp,rawlat,rawlng\n"
                "1,7,1552293204,60.1,26.9\n2,7,1552293209,60.1,26.91\n"

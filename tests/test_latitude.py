@@ -80,6 +80,7 @@ def _noise_levels():
     return arw, vrw
 
 
+@pytest.mark.filterwarnings("ignore:.*near the pole:selfnav.errors.SelfnavWarning")  # expected here
 def test_optimal_estimator_reaches_cramer_rao_bound_monte_carlo():
     rng = np.random.default_rng(42)
     arw, vrw = _noise_levels()
@@ -106,6 +107,7 @@ def test_optimal_estimator_reaches_cramer_rao_bound_monte_carlo():
     assert np.sqrt(np.mean(np.asarray(zseed) ** 2)) > 3 * bound
 
 
+@pytest.mark.filterwarnings("ignore:.*off Earth rate:selfnav.errors.SelfnavWarning")  # expected here
 def test_sigma_widened_for_gyro_scale_error():
     arw, vrw = _noise_levels()
     lat = np.radians(45)
@@ -116,6 +118,8 @@ def test_sigma_widened_for_gyro_scale_error():
     assert abs(res.latitude - lat) < 2 * res.sigma
 
 
+@pytest.mark.filterwarnings("ignore:.*disturbed rest:selfnav.errors.SelfnavWarning")  # expected here
+@pytest.mark.filterwarnings("ignore:.*off Earth rate:selfnav.errors.SelfnavWarning")  # expected here
 def test_disturbed_rest_compensated():
     arw, vrw = np.radians(0.003) / 60, 2e-5
     lat = np.radians(50)
@@ -134,6 +138,7 @@ def test_disturbed_rest_compensated():
     assert np.sqrt(np.mean(np.square(z))) < 2.0
 
 
+@pytest.mark.filterwarnings("ignore:.*disturbed rest:selfnav.errors.SelfnavWarning")  # expected here
 def test_noise_free_disturbed_is_exact():
     lat = np.radians(-20)
     imu = static_imu(lat, 300, 0.01, roll=0.3, pitch=0.1, heading=4.0,
@@ -176,6 +181,7 @@ def test_multiposition_removes_bias_error():
     assert np.sqrt(np.mean(np.square(z))) < 2.0
 
 
+@pytest.mark.filterwarnings("ignore:.*disturbed rest:selfnav.errors.SelfnavWarning")  # expected here
 def test_real_xian_recording(shared_data):
     imu = read_imu(shared_data / "psins_lasergyro_static" / "lasergyro.imu", "psins")
     assert len(imu) == 184718

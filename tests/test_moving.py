@@ -240,9 +240,10 @@ def test_cli_json_and_solution(tmp_path, capsys):
     js = json.loads(capsys.readouterr().out)
     assert js["latitude_end_deg"] == pytest.approx(np.degrees(tr.lat[-1]), abs=0.005)
     text = out.read_text().splitlines()
-    assert text[0].startswith("# simulated")
-    assert "attitude time offset" in text[2] and "IMU rows: instantaneous" in text[2]
-    assert text[4] == "t,lat_deg,lon_deg,sigma_lat_deg,sigma_lon_deg"
+    assert text[0] == "t,lat_deg,lon_deg,sigma_lat_deg,sigma_lon_deg"   # pandas reads it as is
+    notes = json.loads((tmp_path / "sol.csv.json").read_text())["notes"]
+    assert notes[0].startswith("simulated")
+    assert "attitude time offset" in notes[2] and "IMU rows: instantaneous" in notes[2]
 
 
 @pytest.mark.parametrize("case,needle", [
@@ -297,11 +298,12 @@ def test_heading_wraparound_handled(tmp_path):
     assert main(["moving", "--imu", str(imu), "--attitude", str(attf), "--lat0-deg", "45",
                  "--lon0-deg", "20", "--out", str(out), "--gain", "0.2",
                  "--imu-rates", "instantaneous"]) == 0
-    sol = np.loadtxt(out, delimiter=",", comments="#", skiprows=5)
+    sol = np.loadtxt(out, delimiter=",", skiprows=1)   # the header row only (metadata: sol.csv.json)
     assert abs(sol[-1, 1] - np.degrees(tr.lat[-1])) < 0.005
 
 
 # ----------------------------------------------------------------------------- real data
+@pytest.mark.filterwarnings("ignore:.*disturbed rest:selfnav.errors.SelfnavWarning")  # expected here
 def test_real_static_xian_agrees_with_static_method(shared_data):
     from selfnav.io.readers import read_imu
     from selfnav.latitude import estimate_latitude
@@ -423,7 +425,7 @@ def _run_moving(capsys, d, imu, attf, out_name, *extra):
     assert rc == 0
     js = json.loads(capsys.readouterr().out)
     tr = read_truth(d / "truth.csv")
-    sol = np.loadtxt(out, delimiter=",", comments="#", skiprows=6)
+    sol = np.loadtxt(out, delimiter=",", skiprows=1)
     t = sol[:, 0]
     e_lat = sol[:, 1] - np.degrees(np.interp(t, tr.t, tr.lat))
     e_lon = (sol[:, 2] - np.degrees(np.interp(t, tr.t, np.unwrap(tr.lon))) + 180.0) % 360.0 - 180.0

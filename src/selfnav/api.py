@@ -400,9 +400,11 @@ def evaluate(truth, solution, *, roads=None) -> dict:
     ``truth`` and ``solution`` may be :class:`Trajectory`, :class:`Solution` or paths;
     ``roads`` a map path or road polylines for road-relative along/cross-track.
     """
+    rn = "the map" if roads is None or isinstance(roads, list) else str(roads)
     if roads is not None and not isinstance(roads, list):
         roads = load_road_polylines(roads)
-    ev = _evaluate_trajectories(as_trajectory(truth), as_trajectory(solution), roads=roads)
+    ev = _evaluate_trajectories(as_trajectory(truth), as_trajectory(solution), roads=roads,
+                                roads_name=rn)
     return {**ev.metrics, "warnings": list(ev.warnings)}
 
 
@@ -458,10 +460,11 @@ def evaluate_report(truth, solution, *, roads=None, report=None, title: str | No
     tn = truth_name or (str(truth) if not isinstance(truth, (Solution, Trajectory)) else "truth")
     sn = solution_name or (str(solution) if not isinstance(solution, (Solution, Trajectory))
                            else "solution")
+    rn = "the map" if roads is None or isinstance(roads, list) else str(roads)
     if roads is not None and not isinstance(roads, list):
         roads = load_road_polylines(roads)
     ev = _evaluate_trajectories(as_trajectory(truth), as_trajectory(solution), roads=roads,
-                                truth_name=tn, solution_name=sn)
+                                truth_name=tn, solution_name=sn, roads_name=rn)
     out = {"truth": tn, "solution": sn, **ev.metrics, "warnings": list(ev.warnings)}
     if report is not None:
         files = write_report(ev, report, roads=roads, sources={"truth": tn, "solution": sn},

@@ -2,7 +2,10 @@
 
 The truth is interpolated onto the solution's times (only the overlap counts, and never across
 a hole in the truth longer than :data:`MAX_TRUTH_GAP` truth intervals: solution epochs inside
-such a hole are left out, and ``coverage`` says which share of the solution was compared); each solution
+such a hole are left out, and ``solution_compared`` says which share of the solution was
+compared). ``coverage`` is the share of the truth's time span (less its holes) that the
+compared solution covers: a solution that starts late or has holes covers less, and under 99 %
+a warning says so (:func:`truth_coverage`). Each solution
 point's error is the ECEF difference rotated into the local ENU frame at the truth point, in
 metres. Metrics:
 
@@ -28,6 +31,7 @@ import numpy as np
 from selfnav import attitude as att
 from selfnav.earth import WGS84, enu_rotation, geodetic_to_ecef, geodetic_to_enu
 from selfnav.errors import SelfnavError, warn
+from selfnav.summary import coverage, default_max_gap, span_text
 from selfnav.types import Trajectory
 
 #: Speed below which the direction of motion is not trusted as a heading, m/s.
@@ -35,6 +39,21 @@ MIN_SPEED = 0.2
 
 #: The truth is not interpolated across a step longer than this many (median) truth intervals.
 MAX_TRUTH_GAP = 3.0
+
+#: A road map whose roads all lie farther than this from the truth is refused, m.
+MAP_MARGIN_M = 1000.0
+
+#: A solution covering less of the truth's time span than this gets a warning.
+COVERAGE_WARNING = 0.99
+
+
+def truth_coverage(truth: Trajectory, t, holes=()) -> dict:
+    """Share of the truth's time span (less its holes) that the compared solution epochs ``t``
+    cover (:func:`selfnav.summary.coverage`; a step between epochs counts when it is at most
+    three median solution steps, and at least 1.5 median truth intervals)."""
+    d = np.diff(truth.t)
+    floor = 1.5 * float(np.median(d)) if d.size else 0.0
+    return coverage(t, truth.t[0], truth.t[-1], max_gap=default_max_gap(t, floor), holes=holes)
 
 
 def truth_gap_mask(truth_t, t, max_intervals: float = MAX_TRUTH_GAP):
@@ -217,7 +236,8 @@ def along_cross(error_en, direction_en):
 
 
 def evaluate(truth: Trajectory, solution: Trajectory, *, roads=None,
-             truth_name: str = "truth", solution_name: str = "solution") -> Evaluation:
+             truth_name: str = "truth", solution_name: str = "solution",
+             roads_name: str = "the map") -> Evaluation:
     """Errors of ``solution`` against ``truth`` (module docstring).
 
     Parameters
@@ -226,6 +246,8 @@ def evaluate(truth: Trajectory, solution: Trajectory, *, roads=None,
         WGS-84 geodetic, as :func:`selfnav.sim.trajectory.read_truth` returns them.
     roads : list of (M_i, 2) arrays, optional
         Road polylines as ``(lat, lon)`` in rad (WGS-84); enables road-relative along/cross.
+        A map none of whose roads comes within :data:`MAP_MARGIN_M` of the truth is refused
+        (:class:`SelfnavError`, named ``roads_name``): another place's map.
     """
     if len(truth) < 2:
         raise SelfnavError(f"{truth_name}: at least two samples are needed to interpolate")
@@ -270,17 +292,36 @@ def evaluate(truth: Trajectory, solution: Trajectory, *, roads=None,
         u, dist = road_direction(local_xy(tl, tlon, lat0, lon0), rxy)
         flip = u[:, 0] * np.sin(hdg) + u[:, 1] * np.cos(hdg) < 0
         u[flip] *= -1.0
+        if not (dist <= MAP_MARGIN_M).any():
+            raise SelfnavError(
+                f"{roads_name}: no truth point lies within {MAP_MARGIN_M / 1000:g} km of its roads "
+                f"(the nearest is {dist.min() / 1000:.1f} km away): the map of another place? "
+                "Road-relative metrics need the map of the drive")
         ra, rc = along_cross(e, u)
         far = dist > 50.0
         if far.any():
-            warnings.append(f"{int(far.sum())} truth points are more than 50 m from any road")
+            warnings.append(f"{int(far.sum())} of {len(far)} truth points "
+                            f"({100 * far.mean():.1f} %) are more than 50 m from any road of "
+                            f"{roads_name}: their road-relative along/cross-track is not "
+                            "relative to the road driven")
     m = error_metrics(e, along, cross, ra, rc)
     m.update(motion_metrics(truth, solution, t, inside))
+    cov = truth_coverage(truth, t, holes)
     m.update({"samples": int(len(t)), "duration_s": float(t[-1] - t[0]),
               "solution_samples": int(len(solution)), "t_start_s": float(t[0]),
-              "t_end_s": float(t[-1]), "coverage": float(len(t) / len(solution)),
+              "t_end_s": float(t[-1]), "coverage": cov["coverage"],
+              "covered_s": cov["covered_s"], "truth_start_s": float(t0),
+              "truth_end_s": float(t1), "truth_span_s": cov["span_s"],
+              "solution_gaps": cov["gaps"], "longest_uncovered_s": cov["longest_gap_s"],
+              "solution_compared": float(len(t) / len(solution)),
               "truth_holes": len(holes),
               "truth_hole_max_s": float(max((b - a for a, b in holes), default=0.0))})
+    if m["coverage"] < COVERAGE_WARNING:
+        w = (f"{solution_name} covers {100 * m['coverage']:.1f} % of the truth's time span ("
+             f"{span_text(float(t[0]), float(t[-1]), float(t0), float(t1), 'truth')}"
+             f"{', with ' + str(cov['gaps']) + ' hole(s)' if cov['gaps'] else ''}): the metrics "
+             "describe only the part covered")
+        warnings.append(w)
     for w in warnings:
         warn(w)
     return Evaluation(t, e, along, cross, tl, tlon, th, sl, slon, sh, hdg, ra, rc, m, warnings)

@@ -227,6 +227,7 @@ class LatitudeResult:
     earth_rate_ratio_sigma: float
     gravity_ratio: float
     disturbance_compensated: bool = False
+    disturbance_detected: bool = False
     tilt_change: float = 0.0
     tilt_change_sigma: float = 0.0
     positions: int = 1
@@ -235,6 +236,67 @@ class LatitudeResult:
     gyro_bias_sigma: np.ndarray | None = None
     accel_bias_sigma: np.ndarray | None = None
     warnings: list = field(default_factory=list)
+
+    # degrees at the edge (DESIGN §2): the same numbers as to_dict()
+    @property
+    def latitude_deg(self) -> float:
+        return float(np.degrees(self.latitude))
+
+    lat_deg = latitude_deg
+
+    @property
+    def sigma_deg(self) -> float:
+        return float(np.degrees(self.sigma))
+
+    @property
+    def sigma_noise_deg(self) -> float:
+        return float(np.degrees(self.sigma_noise))
+
+    @property
+    def heading_deg(self) -> float:
+        return float(np.degrees(self.heading))
+
+    @property
+    def sigma_heading_deg(self) -> float:
+        return float(np.degrees(self.sigma_heading))
+
+    @property
+    def pitch_deg(self) -> float:
+        return float(np.degrees(self.pitch))
+
+    @property
+    def roll_deg(self) -> float:
+        return float(np.degrees(self.roll))
+
+    @property
+    def tilt_change_deg(self) -> float:
+        return float(np.degrees(self.tilt_change))
+
+    @property
+    def computed(self) -> str:
+        """What was computed, as ``to_dict()["method"]`` says it: ``"optimal"`` (the angle of
+        the mean vectors, tilt-compensated where the rest was disturbed), ``"plain"`` (the same
+        angle without the compensation on a record found disturbed: not optimal there),
+        ``"seed"`` (formula (1.4)), ``"multiposition"``."""
+        if self.positions > 1:
+            return "multiposition"
+        if self.method == "seed":
+            return "seed"
+        if self.disturbance_detected and not self.disturbance_compensated:
+            return "plain"
+        return "optimal"
+
+    @property
+    def estimate(self) -> str:
+        """The estimate in words (the demo's and ``--json``'s ``estimate``)."""
+        comp = ("tilt-compensated (disturbed rest)" if self.disturbance_compensated
+                else "no tilt compensation")
+        return {"multiposition": f"multi-position: {self.positions} positions solved jointly "
+                                 "with the sensor biases",
+                "seed": f"seed formula (1.4), {comp}",
+                "plain": "plain: angle of the mean vectors, no tilt compensation although the "
+                         "rest was disturbed",
+                "optimal": f"optimal: angle of the mean vectors, {comp}"}[self.computed]
 
     def to_dict(self) -> dict:
         d = {
@@ -245,7 +307,9 @@ class LatitudeResult:
             "roll_deg": np.degrees(self.roll),
             "samples": self.samples,
             "duration_s": self.duration,
-            "method": self.method,
+            "method": self.computed,
+            "estimate": self.estimate,
+            "rest": "disturbed" if self.disturbance_compensated else "still",
             "sigma_noise_deg": np.degrees(self.sigma_noise),
             "sigma_heading_deg": np.degrees(self.sigma_heading),
             "omega_mean_deg_per_h": self.omega_mean_b / DEG_PER_H,
@@ -529,6 +593,44 @@ def _tilt_change(imu, lab, n_blocks):
     return d, s
 
 
+#: |mean ω| / Ω − 1 below this is no gyro error worth a warning (1 ppm of the Earth rate,
+#: 1.5e-5 °/h: the rounding of a file's digits, not a sensor)
+RATIO_FLOOR = 1e-6
+#: |mean f| may differ from normal gravity by this (anomaly, unknown height) besides its noise
+GRAVITY_TOLERANCE = 5e-4
+#: false-alarm probability of the Earth-rate and gravity checks (two-sided)
+CHECK_FALSE_ALARM = 1e-3
+
+
+def _t_quantile(dof: int) -> float:
+    """Two-sided :data:`CHECK_FALSE_ALARM` quantile of Student's t with ``dof`` degrees of
+    freedom: the σ of the checks comes from the blocks' own scatter, so it is itself uncertain
+    (3.88 for 19 dof, where a 3σ normal test would warn on 0.7 % of clean records)."""
+    from scipy.stats import t as student_t
+
+    return float(student_t.ppf(1.0 - CHECK_FALSE_ALARM / 2.0, max(int(dof), 1)))
+
+
+def disturbance_matters(tilt: float, tilt_sigma: float, duration: float, cov_w) -> bool:
+    """Is a tilt change between the first and last tenth of a record a disturbance to
+    compensate?
+
+    Two conditions: it stands out of the accelerometer's white noise (4σ), and it moves the
+    Earth-rate estimate by more than the gyro noise does — a tilt ``Δθ`` over ``T`` reads as a
+    rate ``Δθ/T`` to the gyros, compared with twice the RMS σ ``cov_w`` of the compensated
+    rate estimate (the still estimate's batch σ would count the disturbance as noise). Below
+    that the compensation cannot improve the estimate, and an accelerometer's
+    bias instability explains the "tilt" as well (a navigation-grade IMU that never moved shows
+    1–2″ at 7–22σ of its white noise over 10 minutes, 0.003 °/h of rate against a noise of
+    0.005 °/h); a real disturbance (the Xi'an vehicle's 0.2°, the rocking tests' 650″) passes
+    both by orders of magnitude.
+    """
+    if not tilt > 4.0 * tilt_sigma:
+        return False
+    noise_w = float(np.sqrt(max(np.trace(np.asarray(cov_w)) / 3.0, 0.0)))
+    return tilt / max(duration, 1e-9) > 2.0 * noise_w
+
+
 def estimate_latitude(imu, *, method: str = "optimal", rest: str = "auto", h: float | None = None,
                       n_blocks: int = 20) -> LatitudeResult:
     """Latitude, heading, pitch and roll from one static record (seed 000).
@@ -541,8 +643,9 @@ def estimate_latitude(imu, *, method: str = "optimal", rest: str = "auto", h: fl
         measured vectors (module docstring).
     rest : {"auto", "still", "disturbed"}
         ``disturbed`` removes tilt changes seen by the accelerometers from the gyro mean; ``auto``
-        does so when the tilt change between the first and last tenth of the record exceeds four
-        times its noise.
+        does so when the tilt change between the first and last tenth of the record matters
+        (:func:`disturbance_matters`: beyond four times its noise, and larger, as a rate, than
+        the gyro noise).
     h : float, optional
         Height above the ellipsoid for the gravity check, m (default: the file's, else 0).
     n_blocks : int
@@ -568,8 +671,14 @@ def estimate_latitude(imu, *, method: str = "optimal", rest: str = "auto", h: fl
     dtilt, dtilt_s = _tilt_change(imu, lab, nb)
     tilt_mag = float(np.linalg.norm(dtilt))
     tilt_sig = float(np.linalg.norm(dtilt_s))
-    compensate = rest == "disturbed" or (rest == "auto" and tilt_mag > 4.0 * tilt_sig)
-    w_full, cov_w, f_full, cov_f = _rate_estimates(imu, lab, nb, compensate)
+    still = _rate_estimates(imu, lab, nb, False)
+    comp = _rate_estimates(imu, lab, nb, True) if (
+        rest == "disturbed" or tilt_mag > 4.0 * tilt_sig) else None
+    detected = comp is not None and disturbance_matters(tilt_mag, tilt_sig, imu.duration,
+                                                        comp[1])
+    compensate = rest == "disturbed" or (rest == "auto" and detected)
+    w_full, cov_w, f_full, cov_f = comp if compensate else still
+    tq = _t_quantile(nb - 1)
     warnings = []
     if compensate:
         warnings.append(f"disturbed rest: the tilt changed by {np.degrees(tilt_mag) * 3600:.0f}″ "
@@ -593,8 +702,9 @@ def estimate_latitude(imu, *, method: str = "optimal", rest: str = "auto", h: fl
     hh = imu.meta.get("h0_m", 0.0) if h is None else h
     g_normal = float(normal_gravity(lat, hh))
     gratio = float(np.linalg.norm(f_full) / g_normal)
+    gratio_sig = float(np.sqrt(max(f_full @ cov_f @ f_full, 0.0))) / np.linalg.norm(f_full) / g_normal
     sigma2 = sigma_noise**2
-    if abs(ratio - 1.0) > 3.0 * ratio_sig:
+    if abs(ratio - 1.0) > max(tq * ratio_sig, RATIO_FLOOR):
         sigma2 += (ratio - 1.0) ** 2
         # the same unexplained rate, horizontal, turns the gyrocompass heading by up to
         # (ratio − 1)/cos φ rad
@@ -603,8 +713,9 @@ def estimate_latitude(imu, *, method: str = "optimal", rest: str = "auto", h: fl
         warnings.append(f"|mean ω| is {100 * (ratio - 1):+.2f}% off Earth rate "
                         f"({abs(ratio - 1) / max(ratio_sig, 1e-300):.0f}σ of its noise): gyro bias "
                         f"or scale error; sigma widened by {np.degrees(abs(ratio - 1)):.3f}°")
-    # |f| may differ from normal gravity by anomaly and unknown height: allow 0.05 %
-    if abs(gratio - 1.0) > 5e-4:
+    # |f| may differ from normal gravity by anomaly and unknown height (allow 0.05 %), and
+    # by the noise of the mean specific force
+    if abs(gratio - 1.0) > GRAVITY_TOLERANCE + tq * gratio_sig:
         sigma2 += (gratio - 1.0) ** 2
         warnings.append(f"|mean f| is {100 * (gratio - 1):+.3f}% off normal gravity: accelerometer "
                         f"bias or scale error (or a wrong height); sigma widened by "
@@ -626,7 +737,8 @@ def estimate_latitude(imu, *, method: str = "optimal", rest: str = "auto", h: fl
         samples=n, duration=imu.duration, method=method,
         omega_mean_b=w_full, f_mean_b=f_full, earth_rate_ratio=ratio,
         earth_rate_ratio_sigma=ratio_sig, gravity_ratio=gratio,
-        disturbance_compensated=bool(compensate), tilt_change=tilt_mag,
+        disturbance_compensated=bool(compensate), disturbance_detected=bool(detected),
+        tilt_change=tilt_mag,
         tilt_change_sigma=tilt_sig, warnings=warnings,
     )
 

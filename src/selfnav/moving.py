@@ -393,7 +393,8 @@ class MovingSolution:
                               list(self.warnings), terms, dict(self.info))
 
     def to_csv(self, path, *, step_s: float = 0.0, comments=()):
-        """Write ``t, lat_deg, lon_deg, sigma_lat_deg, sigma_lon_deg`` atomically; with
+        """Write ``t, lat_deg, lon_deg, sigma_lat_deg, sigma_lon_deg`` atomically (``comments``
+        go into the JSON sidecar ``<path>.json``, the CSV starts with its header row); with
         ``step_s > 0`` one row per ``step_s`` seconds (and the last). Returns the row count."""
         keep = np.ones(len(self.t), bool)
         if step_s > 0:
@@ -404,7 +405,13 @@ class MovingSolution:
                          "lon_deg": np.degrees(self.lon[keep]),
                          "sigma_lat_deg": np.degrees(self.sigma_lat[keep]),
                          "sigma_lon_deg": np.degrees(self.sigma_lon[keep])},
-                  comments=list(comments), fmt={"t": "%.6f", "lat_deg": "%.9f", "lon_deg": "%.9f"})
+                  fmt={"t": "%.6f", "lat_deg": "%.9f", "lon_deg": "%.9f"},
+                  sidecar={"format": "selfnav solution", "method": "moving base (seeds 002/003)",
+                           "datum": "wgs84", "notes": list(comments),
+                           "columns": {"t": "time, s", "lat_deg": "latitude, deg",
+                                       "lon_deg": "longitude, deg",
+                                       "sigma_lat_deg": "1σ of the latitude, deg",
+                                       "sigma_lon_deg": "1σ of the longitude, deg"}})
         return int(keep.sum())
 
 

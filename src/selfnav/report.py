@@ -94,22 +94,91 @@ def track_figure(ev, roads=None) -> bytes:
         ax.set_ylim(lo[1] - pad, hi[1] + pad)
     ax.plot(txy[:, 0], txy[:, 1], color="k", lw=1.5, label="truth")
     ax.plot(sxy[:, 0], sxy[:, 1], color="C3", lw=1, label="solution")
-    ax.plot(txy[0, 0], txy[0, 1], "go", ms=6, label="start")
-    ax.set_aspect("equal", adjustable="datalim")
-    ax.set_xlabel("East, m")
-    ax.set_ylabel("North, m")
-    ax.set_title(f"Track around {np.degrees(lat0):.6f}°, {np.degrees(lon0):.6f}° (WGS-84)")
+    mark_ends(ax, txy[:, 0], txy[:, 1])
+    ax.plot(0.0, 0.0, "k+", ms=12, mew=1.5,
+            label=f"origin {np.degrees(lat0):.6f}°, {np.degrees(lon0):.6f}°")
+    # fixed limits (the map's) keep the box's shape; otherwise the data limits adjust
+    ax.set_aspect("equal", adjustable="box" if roads else "datalim")
+    ax.set_xlabel("East of the origin, m")
+    ax.set_ylabel("North of the origin, m")
+    ax.set_title(f"Track (compared epochs); origin {np.degrees(lat0):.6f}°, "
+                 f"{np.degrees(lon0):.6f}° (WGS-84)")
     ax.grid(alpha=0.3)
     ax.legend(loc="best", fontsize=8)
     return _png(fig)
 
 
+def mark_ends(ax, x, y, what: str = "truth") -> None:
+    """Start (green circle) and end (red square) marks of a track, with legend entries."""
+    ax.plot(x[0], y[0], "o", color="tab:green", ms=8, mec="k", zorder=5,
+            label=f"start ({what})")
+    ax.plot(x[-1], y[-1], "s", color="tab:red", ms=8, mec="k", zorder=5, label=f"end ({what})")
+
+
+#: metric names in words and their units (the report's table; the JSON keeps the keys)
+METRIC_WORDS = {
+    "truth": ("Truth file", ""), "solution": ("Solution file", ""),
+    "horizontal_rms_m": ("Horizontal error, RMS", "m"),
+    "horizontal_p95_m": ("Horizontal error, 95th percentile", "m"),
+    "horizontal_max_m": ("Horizontal error, maximum", "m"),
+    "horizontal_mean_m": ("Horizontal error, mean", "m"),
+    "vertical_rms_m": ("Vertical error, RMS", "m"),
+    "vertical_max_m": ("Vertical error, largest magnitude", "m"),
+    "east_mean_m": ("East error, mean (bias)", "m"),
+    "north_mean_m": ("North error, mean (bias)", "m"),
+    "up_mean_m": ("Up error, mean (bias)", "m"),
+    "velocity_horizontal_rms_m_s": ("Horizontal velocity error, RMS", "m/s"),
+    "velocity_vertical_rms_m_s": ("Vertical velocity error, RMS", "m/s"),
+    "samples": ("Epochs compared", ""),
+    "duration_s": ("Time from first to last epoch compared", "s"),
+    "solution_samples": ("Epochs in the solution", ""),
+    "t_start_s": ("First epoch compared", "s"), "t_end_s": ("Last epoch compared", "s"),
+    "coverage": ("Coverage of the truth's time span", "%"),
+    "covered_s": ("Time covered by the solution", "s"),
+    "truth_start_s": ("Truth starts", "s"), "truth_end_s": ("Truth ends", "s"),
+    "truth_span_s": ("Truth's time span (less its holes)", "s"),
+    "solution_gaps": ("Holes in the solution", ""),
+    "longest_uncovered_s": ("Longest time without the solution", "s"),
+    "solution_compared": ("Share of the solution's epochs compared", "%"),
+    "truth_holes": ("Holes in the truth (not interpolated)", ""),
+    "truth_hole_max_s": ("Longest hole in the truth", "s"),
+}
+_TRACK = {"along_track": "Along-track error (truth heading)",
+          "cross_track": "Cross-track error (truth heading)",
+          "road_along_track": "Along-track error (road)",
+          "road_cross_track": "Cross-track error (road)"}
+for _k, _words in _TRACK.items():
+    METRIC_WORDS[f"{_k}_rms_m"] = (f"{_words}, RMS", "m")
+    METRIC_WORDS[f"{_k}_mean_m"] = (f"{_words}, mean", "m")
+    METRIC_WORDS[f"{_k}_max_m"] = (f"{_words}, largest magnitude", "m")
+for _k in ("roll", "pitch", "heading"):
+    METRIC_WORDS[f"{_k}_rms_deg"] = (f"{_k.capitalize()} error, RMS", "deg")
+    METRIC_WORDS[f"{_k}_mean_deg"] = (f"{_k.capitalize()} error, mean", "deg")
+_UNITS = (("_m_s", "m/s"), ("_deg", "deg"), ("_m", "m"), ("_s", "s"))
+
+
+def metric_words(key: str):
+    """``(name in words, unit)`` of a metric key: ``"horizontal_rms_m"`` →
+    ``("Horizontal error, RMS", "m")``; an unknown key is spelled out from its own parts."""
+    if key in METRIC_WORDS:
+        return METRIC_WORDS[key]
+    for suffix, unit in _UNITS:
+        if key.endswith(suffix):
+            return key[: -len(suffix)].replace("_", " ").capitalize(), unit
+    return key.replace("_", " ").capitalize(), ""
+
+
 def _table(metrics: dict) -> str:
-    rows = []
+    """The metric table: names in words, the value, its unit (the JSON key as a tooltip)."""
+    rows = ["<tr><th>metric</th><td class=u>value</td><td class=u>unit</td></tr>"]
     for k, v in metrics.items():
+        name, unit = metric_words(str(k))
+        if unit == "%" and isinstance(v, (int, float)):
+            v = 100.0 * v
         if isinstance(v, float):
             v = f"{v:.4g}" if np.isfinite(v) else "—"
-        rows.append(f"<tr><th>{html.escape(str(k))}</th><td>{html.escape(str(v))}</td></tr>")
+        rows.append(f'<tr><th title="{html.escape(str(k))}">{html.escape(name)}</th>'
+                    f"<td>{html.escape(str(v))}</td><td class=u>{html.escape(unit)}</td></tr>")
     return "<table>\n" + "\n".join(rows) + "\n</table>"
 
 
@@ -124,7 +193,8 @@ def html_page(title: str, metrics: dict, figures: dict, notes=()) -> str:
 <html lang="en"><head><meta charset="utf-8"><title>{html.escape(title)}</title>
 <style>body{{font-family:sans-serif;max-width:960px;margin:2em auto;color:#222}}
 table{{border-collapse:collapse}}th,td{{border:1px solid #ccc;padding:3px 8px;text-align:left}}
-td{{font-family:monospace;text-align:right}}img{{max-width:100%}}</style></head>
+td{{font-family:monospace;text-align:right}}td.u{{font-family:sans-serif;text-align:left}}
+img{{max-width:100%}}</style></head>
 <body><h1>{html.escape(title)}</h1>
 <h2>Metrics</h2>
 {_table(metrics)}

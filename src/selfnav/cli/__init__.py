@@ -9,7 +9,9 @@ What the user sees besides the results, whatever the command:
 * a bad input or argument: one line ``selfnav: error: ...`` on stderr, exit 2;
 * something worth knowing: one line ``selfnav: warning: ...`` per
   :class:`~selfnav.errors.SelfnavWarning` (other libraries' warnings are not shown);
-* Ctrl-C: one line ``selfnav: interrupted``, exit 130, outputs left as they were.
+* Ctrl-C: one line ``selfnav: interrupted``, exit 130, outputs left as they were;
+* numba compiling the package's kernels (a first run): one line ``selfnav: compiling (first
+  run only)…`` (:mod:`selfnav.cli.progress`), and progress bars on a terminal.
 """
 from __future__ import annotations
 
@@ -23,6 +25,7 @@ import threading
 import warnings
 
 import typer
+import typer.core
 
 from selfnav.errors import Interrupted, SelfnavError, SelfnavWarning, interrupt_requested
 
@@ -52,10 +55,14 @@ def _root(version: bool = typer.Option(False, "--version", callback=_version, is
 
 def _register_all() -> None:
     import selfnav.cli as pkg
+    from selfnav.cli.options import GroupedCommand
 
     for mod in sorted(pkgutil.iter_modules(pkg.__path__), key=lambda m: m.name):
         if mod.name.startswith("cmd_"):
             importlib.import_module(f"selfnav.cli.{mod.name}").register(app)
+    for info in app.registered_commands:   # --help in panels (options.HELP_PANELS)
+        if info.cls is None or info.cls is typer.core.TyperCommand:
+            info.cls = GroupedCommand
 
 
 _register_all()
@@ -117,8 +124,11 @@ def _usage_line(e) -> str:
 
 
 def _run(argv) -> int:
+    from selfnav.cli.progress import command_of, compile_notice
+
     try:
-        with _interrupt_as_error(last=argv is None), _one_line_warnings():
+        with _interrupt_as_error(last=argv is None), _one_line_warnings(), \
+                compile_notice(command_of(argv)):
             rv = app(args=argv, standalone_mode=False, prog_name="selfnav")
         code = int(rv) if isinstance(rv, int) else 0
         if code == 130:  # typer's answer to a KeyboardInterrupt it caught

@@ -31,8 +31,12 @@ def register(app: typer.Typer) -> None:
 
         if plot is not None:
             check_output_file(plot, (".png",))
-        data = api.read_imu(imu, fmt_old or imu_format, axes=imu_axes, mount=imu_mount)
-        out = api.allan_noise(data, plot=plot, title=f"Allan deviation: {imu.name}")
+        from selfnav.cli.progress import bar
+
+        with bar(f"reading {imu.name}", enabled=not as_json) as update:
+            data = api.read_imu(imu, fmt_old or imu_format, axes=imu_axes, mount=imu_mount)
+            update(0.5, "Allan deviation")
+            out = api.allan_noise(data, plot=plot, title=f"Allan deviation: {imu.name}")
         if as_json:
             emit_json(out)
             return

@@ -28,22 +28,33 @@ def register(app: typer.Typer) -> None:
                           "along/cross-track and the map under the track.")] = None,
     ):
         """Horizontal RMS / 95 % / max and vertical RMS error; along/cross-track; coverage
-        (the share of the solution compared: the truth is never interpolated across its
-        holes)."""
+        (the share of the truth's time span the solution covers; the truth is never
+        interpolated across its holes)."""
         from selfnav import api
         from selfnav.io.output import check_output_folder
 
         if report is not None:
             check_output_folder(report)
-        out = api.evaluate_report(truth, solution, roads=map_path, report=report,
-                                  title=f"selfnav evaluate: {solution.name} against "
-                                        f"{truth.name}")
+        from selfnav.cli.progress import bar
+
+        with bar("evaluating" + (" and writing the report" if report is not None else ""),
+                 enabled=not as_json):
+            out = api.evaluate_report(truth, solution, roads=map_path, report=report,
+                                      title=f"selfnav evaluate: {solution.name} against "
+                                            f"{truth.name}")
         if as_json:
             emit_json(out)
             return
         m = out
-        print(f"{solution} against {truth}: {m['samples']} epochs over {m['duration_s']:.1f} s "
-              f"({100 * m['coverage']:.1f} % of the solution)")
+        from selfnav.summary import span_text
+
+        span = span_text(m["t_start_s"], m["t_end_s"], m["truth_start_s"], m["truth_end_s"],
+                         "truth")
+        print(f"{solution} against {truth}: {m['samples']} epochs {span}")
+        print(f"  coverage    {100 * m['coverage']:.1f} % of the truth's time span"
+              f"{' less its holes' if m['truth_holes'] else ''} "
+              f"({m['covered_s']:.1f} of {m['truth_span_s']:.1f} s); "
+              f"{100 * m['solution_compared']:.1f} % of the solution's epochs compared")
         print(f"  horizontal  RMS {m['horizontal_rms_m']:.3f} m   95 % {m['horizontal_p95_m']:.3f}"
               f" m   max {m['horizontal_max_m']:.3f} m")
         print(f"  vertical    RMS {m['vertical_rms_m']:.3f} m   max {m['vertical_max_m']:.3f} m")

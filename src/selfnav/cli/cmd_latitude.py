@@ -70,11 +70,15 @@ def register(app: typer.Typer) -> None:
             return
         if not imu:
             raise SelfnavError("give an IMU file (or --requirements); see selfnav latitude --help")
-        data = api.read_imu_positions(imu, fmt_old or imu_format, axes=imu_axes,
-                                      mount=imu_mount)
-        multi = data.position is not None and len(np.unique(data.position)) > 1
-        kw = {"h": h_m} if multi else {"rest": rest, "h": h_m}
-        res = api.estimate_latitude(data, method=method, **kw)
+        from selfnav.cli.progress import bar
+
+        with bar("reading the IMU", enabled=not as_json) as update:
+            data = api.read_imu_positions(imu, fmt_old or imu_format, axes=imu_axes,
+                                              mount=imu_mount)
+            multi = data.position is not None and len(np.unique(data.position)) > 1
+            kw = {"h": h_m} if multi else {"rest": rest, "h": h_m}
+            update(0.5, "estimating the latitude")
+            res = api.estimate_latitude(data, method=method, **kw)
         out = res.to_dict()
         if budget:
             out["error_budget_deg"] = api.latitude_error_budget(

@@ -13,6 +13,7 @@ from typing import List, Optional
 
 import typer
 
+from selfnav.cli import options as opt
 from selfnav.cli.common import emit_json
 from selfnav.errors import InputError
 
@@ -74,7 +75,7 @@ def register(app: typer.Typer) -> None:
                                         "Repeatable."),
         map_path: Path = typer.Option(..., "--map", help="Road map: OpenStreetMap .osm or "
                                       ".osm.pbf."),
-        out: Path = typer.Option(..., "--out", help="Matched fixes, .csv or .parquet: "
+        out: Path = typer.Option(..., "--out", parser=opt.file_path, metavar="FILE", help="Matched fixes, .csv or .parquet: "
                                  "[track_id,] t, lat_deg, lon_deg, h_m, cross_m, way_id, "
                                  "matched, match_p, piece."),
         route_out: Optional[Path] = typer.Option(None, "--route-out", help="Each track's driven "

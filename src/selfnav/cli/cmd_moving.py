@@ -33,15 +33,16 @@ def _choice(name, value, choices):
 def register(app: typer.Typer) -> None:
     @app.command("moving")
     def moving(
-        imu: Path = typer.Option(..., "--imu", help="IMU file (CSV t,wx,wy,wz,fx,fy,fz or PSINS .imu)"),
+        imu: opt.ImuFile,
+        out: opt.out_file("Solution CSV: t, lat_deg, lon_deg, sigma_lat_deg, sigma_lon_deg, "
+                          "one row per IMU sample (or per --out-step-s)."),
         attitude: Path = typer.Option(..., "--attitude", help="attitude CSV t,roll_deg,pitch_deg,heading_deg "
                                       "(extra columns, e.g. a truth file, are ignored)"),
         lat0_deg: float = typer.Option(..., "--lat0-deg", callback=opt.check_latitude_deg, help="start latitude, deg (only fixes the branch)"),
         lon0_deg: float = typer.Option(..., "--lon0-deg", callback=opt.check_longitude_deg, help="start longitude, deg (starts (14))"),
-        out: Path = typer.Option(..., "--out", help="solution CSV: t, lat_deg, lon_deg, sigma_lat_deg, "
-                                 "sigma_lon_deg, one row per IMU sample"),
-        json_out: bool = typer.Option(False, "--json", help="print one JSON summary on stdout"),
-        fmt: str = typer.Option("auto", "--format", help="IMU format: auto, csv or psins"),
+        json_out: opt.Json = False,
+        imu_format: opt.ImuFormat = "auto",
+        fmt_old: opt.ImuFormatOld = None,
         imu_axes: opt.ImuAxes = None,
         imu_mount: opt.ImuMount = None,
         imu_rates: str = typer.Option(
@@ -104,7 +105,7 @@ def register(app: typer.Typer) -> None:
         status = (contextlib.nullcontext() if json_out
                   else Console(stderr=True).status("reading IMU and attitude ..."))
         with status as st:
-            imu_data = read_imu(imu, fmt, axes=imu_axes, mount=imu_mount)
+            imu_data = read_imu(imu, fmt_old or imu_format, axes=imu_axes, mount=imu_mount)
             att_data = read_attitude(attitude)
             if st is not None:
                 st.update(f"moving-base latitude/longitude on {len(imu_data)} samples ...")

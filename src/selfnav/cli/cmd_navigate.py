@@ -84,8 +84,9 @@ def register(app: typer.Typer) -> None:
                            "with velocity and attitude, PSINS avp CSV) at the IMU start instead "
                            "of aligning from GNSS; then --gnss is optional.")] = None,
         fix_log: Annotated[Optional[Path], typer.Option(
-            "--fix-log", help="Write one row per GNSS fix: t, status, reason, NIS (a FILE, "
-                              "written atomically).")] = None,
+            "--fix-log", parser=opt.file_path, metavar="FILE",
+            help="Write one row per GNSS fix: t, status, reason, NIS (a FILE, written "
+                 "atomically).")] = None,
         window_test: Annotated[bool, typer.Option(
             "--window-test/--no-window-test",
             help="The outlier window test (off: only the χ² gate).")] = True,
@@ -125,6 +126,7 @@ def register(app: typer.Typer) -> None:
         from selfnav import api
         from selfnav.io.imu import check_imu_rate
         from selfnav.io.output import check_output_file
+        from selfnav.summary import solution_span
 
         check_output_file(out)
         if fix_log is not None:
@@ -180,14 +182,16 @@ def register(app: typer.Typer) -> None:
         if fix_log is not None:
             api.write_fix_log(fix_log, sol)
         span = float(data.t[-1] - data.t[0])
+        cover = solution_span(sol.t, data.t)
         summary = {"method": method, "map": None if map_ is None else str(map_),
-                   "epochs": len(sol), "imu_samples": len(data), "duration_s": span,
+                   "epochs": len(sol), "imu_samples": len(data), "duration_s": span, **cover,
                    "seconds": elapsed, "real_time_factor": span / max(elapsed, 1e-9),
                    **sol.stats, "out": str(out)}
         if as_json:
             emit_json(summary)
             return
-        print(f"{out}: {summary['epochs']} epochs over {span:.1f} s, {elapsed:.1f} s "
+        print(f"{out}: {summary['epochs']} epochs {cover['span']} "
+              f"({100 * cover['coverage']:.0f} % covered), {elapsed:.1f} s "
               f"({summary['real_time_factor']:.0f}× real time)")
         s = sol.stats
         if method == "seed":

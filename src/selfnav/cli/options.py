@@ -11,10 +11,12 @@ scipy); ``tests/test_cli_options.py`` checks that they equal the library's
 """
 from __future__ import annotations
 
+import os
 from pathlib import Path
 from typing import Annotated, Callable, Optional
 
 import typer
+import typer.core
 
 IMU_FORMATS = ("auto", "csv", "psins", "psins-csv", "rtklibexplorer", "kfgins", "ulog")
 GNSS_FORMATS = ("auto", "csv", "pos", "nmea", "psins-avp", "ulog")
@@ -144,11 +146,25 @@ Json = Annotated[bool, typer.Option(
     "--json", help="Print one JSON object on stdout (nothing else there; notes go to stderr).")]
 
 
+def file_path(value) -> Path:
+    """An output FILE name as typed: one ending in ``/`` names a folder and is refused in one
+    line (``Path`` would drop the slash and write a file named like the folder)."""
+    if isinstance(value, Path):
+        return value
+    text = str(value)
+    if text.endswith(("/", os.sep)) or Path(text).name in ("", ".", ".."):
+        base = text.rstrip("/" + os.sep) or "."
+        raise typer.BadParameter(f"'{text}' names a folder (it ends in '/'): give a file name, "
+                                 f"e.g. {base}/solution.csv")
+    return Path(text)
+
+
 def out_file(what: str, required: bool = True):
     """``--out FILE``: the help says what the file holds and how it is written."""
     return Annotated[Path if required else Optional[Path], typer.Option(
-        "--out", help=f"{what} A FILE, written atomically (through a symlink, never over a "
-                      "device); missing parent folders are created.")]
+        "--out", parser=file_path, metavar="FILE",
+        help=f"{what} A FILE, written atomically (through a symlink, never over a "
+             "device); missing parent folders are created.")]
 
 
 def out_folder(what: str):
@@ -214,3 +230,87 @@ Scheduler = Annotated[Optional[str], typer.Option(
                         "--workers is then ignored.")]
 Seed = Annotated[int, typer.Option("--seed", min=0, help="Random seed (≥ 0): the same seed "
                                                          "gives the same result.")]
+
+
+# ---------------------------------------------------------------- --help panels
+#: The panels each command's ``--help`` groups its options into, by parameter name, in order
+#: (an option's own ``rich_help_panel`` wins; one found in no panel goes under "Other
+#: options", which tests/test_cli_options.py refuses, so that a new option gets a panel).
+HELP_PANELS = {
+    "navigate": {
+        "Inputs": ("imu", "gnss", "map_", "init", "odometer", "mag", "imu_format",
+                   "gnss_format", "gnss_datum"),
+        "Outputs": ("out", "out_rate", "out_datum", "fix_log", "as_json"),
+        "Method": ("method", "smooth", "grade"),
+        "Sensor geometry and timing (estimated when not given)": (
+            "lever_arm", "imu_time_offset", "nhc_lever", "mount_states", "scale_factors"),
+        "Outlier defence and vehicle constraints": ("window_test", "shadows", "nhc"),
+        "--method seed only": ("matcher", "ins_datum", "declination_deg"),
+    },
+    "moving": {
+        "Inputs": ("imu", "attitude", "imu_format", "imu_rates", "lat0_deg", "lon0_deg"),
+        "Outputs": ("out", "out_step_s", "json_out"),
+        "Method": ("method", "observer", "gain", "bandwidth_hz", "grade", "drift_deg_h",
+                   "attitude_time_offset"),
+    },
+    "latitude": {
+        "Inputs": ("imu", "imu_format", "h_m"),
+        "Method": ("method", "rest"),
+        "Outputs": ("as_json",),
+        "Error budget (--budget)": ("budget", "gyro_bias_deg_h", "accel_bias_ug"),
+        "Sensor requirements (--requirements)": ("requirements", "lat_deg", "seed_constants"),
+    },
+    "match": {
+        "Inputs": ("gnss", "map_path", "gnss_datum"),
+        "Outputs": ("out", "route_out", "out_datum", "as_json"),
+        "Matcher": ("sigma_m", "radius_m", "beta_m"),
+        "Dask": ("workers", "scheduler"),
+    },
+    "montecarlo": {
+        "Campaign": ("scenario", "runs", "seed", "sets", "list_"),
+        "Outputs": ("out", "as_json"),
+        "Dask": ("workers", "scheduler", "chunk_size"),
+    },
+    "simulate": {"Scenario": ("scenario", "seed", "grade", "duration", "dt"),
+                 "Outputs": ("out", "as_json")},
+    "evaluate": {"Inputs": ("truth", "solution", "map_path"), "Outputs": ("report", "as_json")},
+    "allan": {"Inputs": ("imu", "imu_format"), "Outputs": ("plot", "as_json")},
+    "demo": {"Outputs": ("out", "as_json")},
+}
+OTHER_PANEL = "Other options"
+
+
+def help_panel(command: str, param) -> str:
+    """The ``--help`` panel of a parameter of ``command`` (:data:`HELP_PANELS`)."""
+    own = getattr(param, "rich_help_panel", None)
+    if own:
+        return own
+    for panel, names in HELP_PANELS.get(command, {}).items():
+        if param.name in names:
+            return panel
+    return OTHER_PANEL
+
+
+class GroupedCommand(typer.core.TyperCommand):
+    """A command whose plain ``--help`` lists its options in panels (:data:`HELP_PANELS`),
+    the way typer's rich help would with ``rich_help_panel``, without rich's markup."""
+
+    def format_options(self, ctx, formatter) -> None:
+        args, panels = [], {}
+        order = list(HELP_PANELS.get(self.name, {}))
+        for param in self.get_params(ctx):
+            rv = param.get_help_record(ctx)
+            if rv is None:
+                continue
+            if param.param_type_name == "argument":
+                args.append(rv)
+            else:
+                name = "Options" if param.name == "help" else help_panel(self.name, param)
+                panels.setdefault(name, []).append(rv)
+        if args:
+            with formatter.section("Arguments"):
+                formatter.write_dl(args)
+        for name in [*order, OTHER_PANEL, "Options"]:
+            if panels.get(name):
+                with formatter.section(name):
+                    formatter.write_dl(panels[name])

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from selfnav.errors import InputError
-from selfnav.io.output import atomic_path, atomic_write_bytes  # noqa: F401 (re-exported)
+from selfnav.io.output import atomic_path, atomic_write_bytes, check_output_file  # noqa: F401
 
 
 def open_text(path: Path) -> str:
@@ -235,7 +235,23 @@ def check_time(table, column="t", *, min_rows=1):
     return t
 
 
-def write_csv(path, columns: dict, *, comments=(), fmt="%.10g"):
+def sidecar_path(path) -> Path:
+    """The JSON sidecar of a CSV file: ``sol.csv`` → ``sol.csv.json``."""
+    path = Path(path)
+    return path.with_name(path.name + ".json")
+
+
+def read_sidecar(path) -> dict:
+    """The JSON sidecar of ``path`` as a dict (empty when there is none or it is unreadable)."""
+    import json
+
+    try:
+        return json.loads(sidecar_path(path).read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return {}
+
+
+def write_csv(path, columns: dict, *, comments=(), fmt="%.10g", sidecar: dict | None = None):
     """Write named columns to ``path`` atomically (temporary file moved into place).
 
     Parameters
@@ -247,8 +263,29 @@ def write_csv(path, columns: dict, *, comments=(), fmt="%.10g"):
         Lines written first, each prefixed with ``# ``.
     fmt : str or dict
         printf format, or a ``{name: format}`` mapping.
+    sidecar : dict, optional
+        Metadata written as JSON to ``<path>.json`` (:func:`sidecar_path`), the pair moved into
+        place together; the CSV itself then starts with its header row (a plain
+        ``pandas.read_csv`` reads it).
     """
+    if isinstance(path, str):
+        check_output_file(path)       # 'newdir/' names a folder: refused, not written as a file
     path = Path(path)
+    if sidecar is not None:
+        from selfnav.io.jsonio import dumps
+        from selfnav.io.output import atomic_paths
+
+        side = sidecar_path(path)
+        with atomic_paths(path, side) as (tmp, tmp_side):
+            _write_rows(tmp, columns, comments, fmt)
+            Path(tmp_side).write_text(dumps(sidecar, indent=2) + "\n", encoding="utf-8")
+        return path
+    with atomic_path(path) as tmp:
+        _write_rows(tmp, columns, comments, fmt)
+    return path
+
+
+def _write_rows(tmp, columns: dict, comments, fmt) -> None:
     names = list(columns)
     arrs = [np.asarray(columns[n]) for n in names]
     n = {len(a) for a in arrs}
@@ -257,7 +294,7 @@ def write_csv(path, columns: dict, *, comments=(), fmt="%.10g"):
     text = [a.dtype.kind in "OUS" for a in arrs]
     fmts = ["%s" if txt else (fmt.get(k, "%.10g") if isinstance(fmt, dict) else fmt)
             for k, txt in zip(names, text)]
-    with atomic_path(path) as tmp, open(tmp, "w", newline="\n") as fh:
+    with open(tmp, "w", newline="\n") as fh:
         for c in comments:
             fh.write(f"# {c}\n")
         fh.write(",".join(names) + "\n")
@@ -269,7 +306,44 @@ def write_csv(path, columns: dict, *, comments=(), fmt="%.10g"):
             else:
                 table = np.column_stack(arrs)
             np.savetxt(fh, table, delimiter=",", fmt=fmts)
-    return path
+
+
+def header_names(path) -> list:
+    """The lower-case column names of a CSV (its first line that is not a ``#`` comment)."""
+    text = open_text(Path(path))
+    for line in text.split("\n"):
+        s = line.strip()
+        if s and not s.startswith("#"):
+            delim = "," if "," in s else None
+            return [h.strip().lower() for h in (s.split(delim) if delim else s.split())]
+    return []
+
+
+def read_columns(path, names) -> dict:
+    """Columns ``names`` of a CSV with a header row, each as float64 when every value is a
+    number, else as text (``object`` array of ``str``); ``#`` lines are skipped. For the few
+    per-row status columns of a solution (the numeric bulk goes through :func:`read_table`)."""
+    path = Path(path)
+    text = open_text(path)
+    lines = [ln for ln in text.split("\n") if ln.strip() and not ln.lstrip().startswith("#")]
+    if not lines:
+        return {}
+    head = header_names(path)
+    delim = "," if "," in lines[0] else None
+    index = {n: k for k, n in reversed(list(enumerate(head)))}
+    want = [n for n in names if n in index]
+    if not want or len(lines) < 2:
+        return {}
+    rows = [ln.split(delim) if delim else ln.split() for ln in lines[1:]]
+    out = {}
+    for n in want:
+        k = index[n]
+        vals = [r[k].strip() if k < len(r) else "" for r in rows]
+        try:
+            out[n] = np.asarray(vals, dtype=float)
+        except ValueError:
+            out[n] = np.asarray(vals, dtype=object)
+    return out
 
 
 def check_positive(table, column):

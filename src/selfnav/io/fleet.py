@@ -480,8 +480,9 @@ def _fmt(values, spec, empty=""):
 
 
 class FleetWriter:
-    """Matched fixes to CSV (``#`` comments, header) or Parquet, streamed track by track and
-    moved into place only when complete (nothing half-written on failure).
+    """Matched fixes to CSV (header row, no ``#`` lines) or Parquet, streamed track by track
+    and moved into place only when complete (nothing half-written on failure), with a JSON
+    sidecar ``<path>.json`` (what produced the file: ``notes``, ``columns``).
 
     Columns: ``[track_id,] t, lat_deg, lon_deg, h_m, cross_m, way_id, matched, match_p,
     piece``; ``t`` is the input's text (seconds or ISO-8601, as it came).
@@ -506,20 +507,25 @@ class FleetWriter:
     def __enter__(self):
         import contextlib
 
-        from selfnav.io.csvio import atomic_path
+        from selfnav.io.csvio import sidecar_path
+        from selfnav.io.jsonio import dumps
+        from selfnav.io.output import atomic_paths
 
         self._stack = contextlib.ExitStack()
-        self._tmp = self._stack.enter_context(atomic_path(self.path))
+        self._tmp, tmp_side = self._stack.enter_context(
+            atomic_paths(self.path, sidecar_path(self.path)))
         names = (["track_id"] if self.track_id else []) + ["t", "lat_deg", "lon_deg", "h_m",
                                                            "cross_m", "way_id", "matched",
                                                            "match_p", "piece"]
+        # what produced the file goes into the JSON sidecar <out>.json: the CSV starts with
+        # its header row (a plain pandas.read_csv reads it)
+        Path(tmp_side).write_text(dumps({"format": "selfnav match", "notes": self.comments,
+                                         "columns": names}) + "\n", encoding="utf-8")
         if self.parquet:
             self._batch = []
             self._pq = None
         else:
             self._fh = self._stack.enter_context(open(self._tmp, "w", newline="\n"))
-            for c in self.comments:
-                self._fh.write(f"# {c}\n")
             self._fh.write(",".join(names) + "\n")
         return self
 

@@ -203,12 +203,57 @@ def rest_noise_density(x, dt: float) -> float:
 MAX_REST_F_RMS = 0.2
 
 
+#: RMS of the 1-s mean gyro rate (beyond its white noise) above which a record turns, rad/s
+#: (0.5 °/s: no gyro's bias wanders that much within a record; a car's corners: 10-30 °/s, a
+#: ship's roll: a few °/s)
+MAX_REST_RATE_RMS = np.radians(0.5)
+#: RMS of the 1-s mean specific force per axis (beyond its white noise) above which a record
+#: moves, m/s² (0.5: a 3° tilt swing or a car's accelerations; the Xi'an vehicle's 0.2° drift:
+#: 0.03)
+MAX_REST_F_AXIS_RMS = 0.5
+
+
+def _excess_rms(x, n_block: int) -> np.ndarray:
+    """RMS of the ``n_block``-sample means of ``x`` (per column) beyond what its white noise
+    alone gives them (the noise from the sample-to-sample differences)."""
+    x = np.asarray(x, dtype=float).reshape(len(x), -1)
+    k = len(x) // n_block
+    means = x[: k * n_block].reshape(k, n_block, -1).mean(axis=1)
+    white2 = np.var(np.diff(x, axis=0), axis=0) / 2.0 / n_block
+    return np.sqrt(np.clip(np.var(means, axis=0) - white2, 0.0, None))
+
+
+def motion_of(imu: ImuData) -> str:
+    """What says a record meant to be at rest moves (empty when nothing does), judged on 1-s
+    means beyond the sensor's white noise (so a noisy sensor at rest is not "moving"): the
+    rate turning (:data:`MAX_REST_RATE_RMS`), ``|f|`` varying (:data:`MAX_REST_F_RMS`: the
+    unit accelerating), or the specific force swinging on an axis (:data:`MAX_REST_F_AXIS_RMS`:
+    tilting, rocking)."""
+    n_block = max(int(round(1.0 / imu.dt)), 1)
+    if len(imu) < 10 * n_block:
+        n_block = max(len(imu) // 10, 1)
+    if len(imu) < 2 * n_block or len(imu) < 10:
+        return ""
+    f = imu.f_ib_b
+    w = _excess_rms(imu.omega_ib_b, n_block).max()
+    fn = float(_excess_rms(np.sqrt(np.einsum("ij,ij->i", f, f)), n_block)[0])
+    fa = _excess_rms(f, n_block).max()
+    if w > MAX_REST_RATE_RMS:
+        return f"the gyros show it turning, {np.degrees(w):.2g} °/s RMS (1-s means)"
+    if fn > MAX_REST_F_RMS:
+        return f"|f| varies by {fn:.2g} m/s² RMS (1-s means): the unit is accelerating"
+    if fa > MAX_REST_F_AXIS_RMS:
+        return f"the specific force swings by {fa:.2g} m/s² RMS on an axis (1-s means): tilting"
+    return ""
+
+
 def check_rest_units(imu: ImuData, path=None) -> None:
     """One-line warnings for a record meant to be at rest (``allan``, ``latitude``): one that
     moves, and gyros that fit deg/s better than rad/s.
 
-    * ``|f|`` varying by more than :data:`MAX_REST_F_RMS` RMS: not at rest (the Allan
-      deviation of a moving record measures the motion);
+    * moving (:func:`motion_of`: the 1-s means turning, ``|f|`` varying, the specific force
+      swinging beyond the white noise): not at rest (the Allan deviation of a moving record
+      measures the motion);
     * a mean rate beyond 3000 × the Earth rate (12.6 °/s): no gyro bias is that large, a MEMS
       bias in deg/s is;
     * a white noise above :data:`MAX_PLAUSIBLE_ARW_DEG_PER_SQRT_H`: a MEMS gyro's noise in
@@ -221,11 +266,10 @@ def check_rest_units(imu: ImuData, path=None) -> None:
     path = path or imu.source or "IMU data"
     if len(imu) < 3:
         return
-    fn = np.sqrt(np.einsum("ij,ij->i", imu.f_ib_b, imu.f_ib_b))
-    f_rms = float(np.std(fn))
-    if f_rms > MAX_REST_F_RMS:
-        warn(f"{path}: not at rest: |f| varies by {f_rms:.2g} m/s² RMS; an Allan or latitude "
-             "analysis of a moving record measures the motion, not the sensor")
+    moving = motion_of(imu)
+    if moving:
+        warn(f"{path}: not at rest: {moving}; an Allan or latitude analysis of a moving record "
+             "measures the motion, not the sensor")
         return
     ratio = earth_rate_ratio(imu)
     arw = np.degrees(rest_noise_density(imu.omega_ib_b, imu.dt)) * 60.0

@@ -73,6 +73,9 @@ def check_output_file(path, suffixes=()) -> Path:
     shown = Path(path)
     if str(path) in ("", "-"):
         raise OutputError(shown or "-", "give a file name (selfnav writes files, not stdout)")
+    if isinstance(path, str) and (path.endswith(("/", os.sep)) or shown.name in ("", ".", "..")):
+        raise OutputError(path, "names a folder (it ends in '/'): give a file name (e.g. "
+                          f"{shown / 'solution.csv'})")
     if suffixes and shown.suffix.lower() not in suffixes:
         raise OutputError(shown, f"give a name ending in {' or '.join(suffixes)} (the file "
                           f"written is {suffixes[0].lstrip('.').upper()})")
@@ -170,6 +173,46 @@ def atomic_path(path):
         raise
 
 
+@contextlib.contextmanager
+def atomic_paths(*paths):
+    """Yield temporary paths beside each of ``paths``; on success move them all into place
+    while Ctrl-C is held back (a file and its JSON sidecar: the new pair or the old, never a
+    mix). The checks of :func:`atomic_path` apply to each."""
+    with contextlib.ExitStack() as stack:
+        tmps = [stack.enter_context(_deferred(p)) for p in paths]
+        yield [t for t, _ in tmps]
+        with uninterrupted():
+            for tmp, commit in tmps:
+                commit()
+
+
+@contextlib.contextmanager
+def _deferred(path):
+    """:func:`atomic_path` whose final move is done by the caller (``commit``)."""
+    shown = Path(path)
+    target = check_output_file(shown)
+    _make_parents(target.parent, shown)
+    mode = _new_mode(target)
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)
+    except OSError as e:
+        raise OutputError(shown, f"cannot create a file in {target.parent} ({e.strerror})") \
+            from None
+    os.close(fd)
+
+    def commit():
+        try:
+            os.chmod(tmp, mode)
+            os.replace(tmp, target)
+        except OSError as e:
+            raise OutputError(shown, f"cannot be written ({e.strerror or e})") from None
+
+    try:
+        yield tmp, commit
+    finally:
+        _unlink(tmp)     # gone already when committed
+
+
 def _unlink(p) -> None:
     with contextlib.suppress(OSError):
         os.unlink(p)
@@ -177,6 +220,7 @@ def _unlink(p) -> None:
 
 def atomic_write_bytes(path, data: bytes) -> Path:
     """Write bytes to ``path`` through a temporary file moved into place."""
+    check_output_file(path)           # a str ending in '/' names a folder: refused
     with atomic_path(path) as tmp, open(tmp, "wb") as fh:
         fh.write(data)
     return Path(path)
@@ -261,6 +305,6 @@ def write_figure(fig, path, dpi: int = 110, **kw) -> Path:
     return atomic_write_bytes(path, figure_png(fig, dpi, **kw))
 
 
-__all__ = ["atomic_path", "atomic_write_bytes", "atomic_write_text", "atomic_copy",
+__all__ = ["atomic_path", "atomic_paths", "atomic_write_bytes", "atomic_write_text", "atomic_copy",
            "atomic_folder", "check_output_file", "check_output_folder", "uninterrupted", "umask",
            "figure_png", "write_figure"]
