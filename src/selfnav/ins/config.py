@@ -394,7 +394,8 @@ class Integrity:
         the tests an hour holds
     integrity_risk : the risk a protection level stands for (two-sided normal factor)
     branch_every_s : s between dead-reckoning references while the GNSS is healthy
-    branch_after_fixes : consecutive fused fixes before a reference is branched
+    branch_after_s : s of fixes fused without a break before a reference is branched (a
+        filter just back from a long dead reckoning has not settled: its σ is not yet honest)
     max_age_s : s a reference lives while no episode is open (beyond a few minutes a MEMS
         dead reckoning's linearised σ stops covering it: on drive_0708 4-minute branches
         were 350 m off at a 65 m σ)
@@ -405,6 +406,8 @@ class Integrity:
     run_s : s a run of fixes must span before it may end an episode
     run_min_fixes : fixes a run needs at least
     run_max_s : s of the most recent fixes a run keeps
+    velocity_span_s : s of a run's last fixes whose own velocity is given to the navigator
+        when the run ends an episode
     onset_s : s of fixes after an episode opens that characterise the fault (a smooth fault
         is then extrapolated: the fixes are taken back when they no longer follow it)
     reinit_after_s : s of fixes that agree with each other and move with the INS but stand
@@ -417,7 +420,7 @@ class Integrity:
     false_alarms_per_hour: float = 0.1
     integrity_risk: float = 1e-5
     branch_every_s: float = 10.0
-    branch_after_fixes: int = 3
+    branch_after_s: float = 10.0
     max_age_s: float = 160.0
     min_age_s: float = 2.0
     reference_step_s: float = 1.0
@@ -426,6 +429,7 @@ class Integrity:
     run_min_fixes: int = 5
     run_max_s: float = 30.0
     onset_s: float = 3.0
+    velocity_span_s: float = 2.0
     reinit_after_s: float = 20.0
     outage_s: float = 2.0
     separation_floor_m: float = 0.05

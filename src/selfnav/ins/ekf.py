@@ -450,6 +450,11 @@ class InsGnssFilter:
                 w[sl] = ka
         return w
 
+    def white_velocity_density(self) -> np.ndarray:
+        """The velocity random-walk density the filter propagates now, (m/s)²/s per axis
+        (the noise scale and the vibration factor included)."""
+        return self._q_white[IV] * self.q_scale * self.vibration[1]
+
     @property
     def t_true(self) -> float:
         """True time of the state: the IMU stamp plus the whole time offset, s."""

@@ -68,6 +68,7 @@ class Episode:
     consistent_runs: int = 0
     onset: list = field(default_factory=list)   # the first fixes' offsets from M (_RunFix)
     fault: dict | None = None                   # the fault's model from them (smooth faults)
+    origin: tuple | None = None                 # (lat, lon) of the first fix of the episode
     characterised: bool = False
 
     def to_dict(self) -> dict:
@@ -81,6 +82,7 @@ class _RunFix:
     t: float
     offset: np.ndarray     # fix − M's prediction, ENU horizontal, m
     sigma: float
+    p: np.ndarray | None = None   # the fix, ENU horizontal from the episode's origin, m
 
 
 @dataclass
@@ -94,6 +96,7 @@ class Verdict:
     reset_to: object = None             # a reference to reset M to (a filter)
     excluded_since: float | None = None  # fused fixes after this time are now excluded
     widen: np.ndarray | None = None      # open M's position σ to this offset first (INS fault)
+    run_velocity: tuple | None = None    # (velocity ENU, cov) the run of fixes shows
     vehicle: dict = field(default_factory=dict)
 
 
@@ -122,6 +125,7 @@ class FaultBank:
         self.run: list[_RunFix] = []
         self.streak = 0                 # consecutive rejected fixes (normal mode)
         self.used_streak = 0            # consecutive fused fixes (normal mode)
+        self.t_healthy = None           # since when the fixes have been fused without a break
         self._buf = []                  # IMU blocks since the last reference step
         self._t_step = -np.inf
         self._t_branch = -np.inf
@@ -168,7 +172,8 @@ class FaultBank:
         """Branch a new reference from ``M`` every ``branch_every_s`` while the GNSS is healthy;
         keep the oldest reference of each age octave, none older than ``max_age_s``."""
         ig = self.cfg.integrity
-        if self.episode is None and self.used_streak >= ig.branch_after_fixes \
+        if self.episode is None and self.t_healthy is not None \
+                and t - self.t_healthy >= ig.branch_after_s - 1e-9 \
                 and t - self._t_branch >= ig.branch_every_s - 1e-9:
             self.flush()
             self.refs.append(Reference(t, flt.copy()))
@@ -180,7 +185,7 @@ class FaultBank:
         keep, octaves = [], set()
         for ref in self.refs:                       # oldest first
             age = t - ref.t0
-            if age > ig.max_age_s and self.episode is None:
+            if age > ig.max_age_s:
                 continue
             o = int(np.floor(np.log2(max(age, 1e-3) / ig.branch_every_s))) if age >= \
                 ig.branch_every_s else -1
@@ -195,9 +200,11 @@ class FaultBank:
         return [r for r in self.refs if t - r.t0 >= self.cfg.integrity.min_age_s]
 
     # ------------------------------------------------------------------ the decision
-    def judge(self, flt, m_pos, t) -> Verdict:
+    def judge(self, flt, m_pos, t, latlon=None) -> Verdict:
         """The decision for a position fix (a linearised :class:`~selfnav.ins.measurements.Model`
-        ``m_pos`` of the horizontal rows) against ``M`` = ``flt`` and the references."""
+        ``m_pos`` of the horizontal rows; ``latlon`` its position, rad) against ``M`` = ``flt``
+        and the references."""
+        self._latlon = latlon
         P = flt.P
         self._end_outage(t)
         S = m_pos.H @ P @ m_pos.H.T + m_pos.R
@@ -240,6 +247,8 @@ class FaultBank:
                            reset_to=ref.flt, excluded_since=ref.t0)
         self.streak = 0
         self.used_streak += 1
+        if self.used_streak == 1:
+            self.t_healthy = t
         if self.adapter is not None:
             for q, age in tested:
                 self.adapter.on_reference(t, q, age)
@@ -274,6 +283,11 @@ class FaultBank:
         ep.fixes += 1
         in_gate = nis <= self.gate
         fix = _RunFix(t, -m_pos.r[:2].copy(), float(np.sqrt(m_pos.R[0, 0])))
+        if self._latlon is not None:
+            if ep.origin is None:
+                ep.origin = self._latlon
+            fix.p = enu_offset(ep.origin[0], ep.origin[1], 0.0, self._latlon[0],
+                               self._latlon[1], 0.0)[:2]
         if not ep.characterised:
             self._characterise(ep, fix)
         self.run.append(fix)
@@ -306,7 +320,9 @@ class FaultBank:
             self.recoveries += 1
             self.streak = 0
             self.used_streak = 1
-            return Verdict(FixStatus.USED, f"GNSS healthy again ({test['why']})", nis, apply=True)
+            self.t_healthy = t
+            return Verdict(FixStatus.USED, f"GNSS healthy again ({test['why']})", nis, apply=True,
+                           run_velocity=test.get("velocity"))
         if test["white"] and test["moves"] and span >= ig.reinit_after_s - 1e-9:
             # the other hypothesis: the fixes agree with each other and move with the INS, but
             # have stood outside its envelope this long — the dead reckoning is off by more
@@ -316,9 +332,11 @@ class FaultBank:
             self.reinits += 1
             self.streak = 0
             self.used_streak = 1
+            self.t_healthy = t
             return Verdict(FixStatus.USED, f"the INS was off: {test['why']} "
                            f"{np.hypot(*test['offset']):.1f} m from it for {span:.0f} s", nis,
-                           apply=True, widen=test["offset"])
+                           apply=True, widen=test["offset"],
+                           run_velocity=test.get("velocity"))
         why = test["why"]
         if not in_gate:
             why = f"outside the dead-reckoning envelope (NIS {nis:.3g}); {why}"
@@ -368,7 +386,7 @@ class FaultBank:
         S1, S0 = P_r + C_f, P_r
         q1 = float((o - pred) @ np.linalg.solve(S1, o - pred))
         q0 = float(o @ np.linalg.solve(S0, o))
-        llr = 0.5 * (q0 - q1) - 0.5 * np.log(np.linalg.det(S0) / np.linalg.det(S1))
+        llr = 0.5 * (q0 - q1) - 0.5 * np.log(np.linalg.det(S1) / np.linalg.det(S0))
         inside = float(pred @ np.linalg.solve(flt.P[:2, :2], pred)) <= 1.0
         if inside or llr < -0.5 * self.gate:
             return None
@@ -404,7 +422,10 @@ class FaultBank:
             return None
         tt = np.array([f.t for f in run])
         o = np.array([f.offset for f in run])
-        s = np.array([f.sigma for f in run])
+        # the fixes' σ and the dead reckoning's own wander over the run (the velocity random
+        # walk, which no quadratic absorbs): ``q_v T³/3``
+        wander = float(np.mean(flt.white_velocity_density()[:2])) * (tt[-1] - tt[0]) ** 3 / 3.0
+        s = np.sqrt(np.array([f.sigma for f in run]) ** 2 + wander)
         w = 1.0 / s**2
         tc = tt - tt[-1]
         A = np.column_stack([np.ones_like(tc), tc, tc * tc])
@@ -428,8 +449,24 @@ class FaultBank:
             why = f"{n} fixes over {dur:.0f} s move with the INS"
         if self.diag is not None:
             self.diag.append(("run", tt[-1], n, dur, white, moves, rate.tolist(), np.sqrt(np.diag(C)).tolist(), coef[0].tolist(), chi_res, dof))
-        return {"white": white, "moves": moves, "offset": coef[0], "why": why,
-                "offset_var": float(np.linalg.inv(N)[0, 0])}
+        Ni = np.linalg.inv(N)
+        out = {"white": white, "moves": moves, "offset": coef[0], "why": why,
+               "offset_var": float(Ni[0, 0]), "rate": rate, "rate_cov": np.eye(2) * Ni[1, 1]}
+        last = [f for f in run if f.t >= tt[-1] - ig.velocity_span_s - 1e-9]
+        if len(last) >= 4 and all(f.p is not None for f in last):
+            # the fixes' own velocity at the run's end (a quadratic through their positions
+            # over the last seconds): what the run measures of the velocity, whatever M's
+            # drift did during it
+            tl = np.array([f.t for f in last]) - tt[-1]
+            Al = np.column_stack([np.ones_like(tl), tl, tl * tl])
+            wf = 1.0 / np.array([f.sigma for f in last]) ** 2
+            Nf = (Al * wf[:, None]).T @ Al
+            pl = np.array([f.p for f in last])
+            cf = np.linalg.solve(Nf, (Al * wf[:, None]).T @ pl)
+            res_f = pl - Al @ cf
+            k = max(float(np.sum(wf[:, None] * res_f**2)) / max(2 * (len(last) - 3), 1), 1.0)
+            out["velocity"] = (cf[1], np.eye(2) * np.linalg.inv(Nf)[1, 1] * k)
+        return out
 
     def _open(self, t, reset, sep=0.0):
         self.episode = Episode(t, reset=reset, kind="drag" if reset else "outliers",

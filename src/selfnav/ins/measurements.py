@@ -318,6 +318,22 @@ class RoadLine(Measurement):
 
 
 @dataclass
+class RunVelocity(Measurement):
+    """The horizontal velocity a run of fixes shows (ENU m/s, covariance 2×2): the rate of
+    their offsets from a dead reckoning (:mod:`selfnav.ins.hypotheses`)."""
+
+    velocity_n: np.ndarray
+    cov: np.ndarray
+    kind = "run velocity"
+
+    def model(self, flt) -> Model:
+        H = np.zeros((2, flt.nx))
+        H[0, 3] = H[1, 4] = 1.0
+        r = flt.ins.velocity_n[:2] - np.asarray(self.velocity_n, float)
+        return Model(self.kind, r, H, np.asarray(self.cov, float))
+
+
+@dataclass
 class LevelRoad(Measurement):
     """A level-road prior: the vertical velocity is zero within ``sigma`` m/s."""
 
@@ -345,5 +361,5 @@ class AlongTrackWiden:
 
 
 __all__ = ["Model", "Measurement", "PositionFix", "VelocityFix", "NonHolonomic",
-           "ZeroVelocity", "WheelSpeed", "Heading", "RoadLine", "LevelRoad",
+           "ZeroVelocity", "WheelSpeed", "Heading", "RoadLine", "LevelRoad", "RunVelocity",
            "vehicle_velocity", "_POS"]

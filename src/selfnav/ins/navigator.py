@@ -44,8 +44,8 @@ from selfnav.ins.config import FilterConfig
 from selfnav.ins.ekf import (IBA, IBG, IP, IR, IV, PACK, PACK_SIZE, InsGnssFilter, apply_error,
                              pack_state, rts_smooth)
 from selfnav.ins.hypotheses import FaultBank
-from selfnav.ins.measurements import (Heading, NonHolonomic, PositionFix, VelocityFix,
-                                      WheelSpeed, ZeroVelocity)
+from selfnav.ins.measurements import (Heading, NonHolonomic, PositionFix, RunVelocity,
+                                      VelocityFix, WheelSpeed, ZeroVelocity)
 from selfnav.ins.policy import FixDecision, FixStatus, NavStatus, chi2_gate
 from selfnav.ins.startup import StartUp
 from selfnav.types import Trajectory
@@ -627,7 +627,9 @@ class Navigator:
         tt = np.concatenate([h[0] for h in self._hist]) + flt.time_offset_applied
         imu = ImuData(tt, np.concatenate([h[1] for h in self._hist]),
                       np.concatenate([h[2] for h in self._hist]))
-        fx = [f for f in self.fixes if t_min <= f.t <= t]
+        # only fixes the navigator fused (a drag's fixes would pull the search with them)
+        fx = [f for f in self.fixes if t_min <= f.t <= t
+              and FixStatus(self.log["status"][f.index]).fused and not self.log["excluded"][f.index]]
         if len(fx) < 30:
             return
         vel = None
@@ -646,14 +648,17 @@ class Navigator:
         if self._debug:
             print(f"toff check t={t:.1f} est {tau:+.4f}±{s_tau:.4f} state {flt.time_offset:+.4f}±{s_cur:.4f}")
         if abs(d) > max(st.time_offset_coarse_s, 3.0 * np.hypot(s_tau, s_cur)):
-            flt.time_offset = tau
-            flt.P[i, :] = 0.0
-            flt.P[:, i] = 0.0
-            flt.P[i, i] = max(s_tau, st.time_offset_coarse_s) ** 2
-            v, a = flt.ins.velocity_n, flt.acceleration_n
-            for k in range(3):
-                flt.P[k, k] += (v[k] * d) ** 2
-                flt.P[3 + k, 3 + k] += (a[k] * d) ** 2 + (0.5 * v[k] * d / max(abs(d), 1.0)) ** 2
+            # the offset is the hardware's, not a hypothesis': the references take it too
+            for f in [flt] + [r.flt for r in self.bank.refs]:
+                d_f = tau - f.time_offset
+                f.time_offset = tau
+                f.P[i, :] = 0.0
+                f.P[:, i] = 0.0
+                f.P[i, i] = max(s_tau, st.time_offset_coarse_s) ** 2
+                v, a = f.ins.velocity_n, f.acceleration_n
+                for k in range(3):
+                    f.P[k, k] += (v[k] * d_f) ** 2
+                    f.P[3 + k, 3 + k] += (a[k] * d_f) ** 2
             self._reset_flag = True
             self.counts["time_offset_resets"] += 1
 
@@ -682,7 +687,7 @@ class Navigator:
         nis_v = float(m.r[2] ** 2 / S3[2, 2])
         if self._fix_dt:
             self.bank.fix_dt = float(np.median(self._fix_dt))
-        v = self.bank.judge(flt, mh, fx.t)
+        v = self.bank.judge(flt, mh, fx.t, (fx.lat, fx.lon))
         if v.reset_to is not None:
             self._reset_to(v.reset_to, v.excluded_since)
             m = PositionFix(fx.t, fx.lat, fx.lon, fx.h, fx.sigma_h, fx.sigma_v).model(self.flt)
@@ -696,6 +701,12 @@ class Navigator:
             flt.P += add
             m = PositionFix(fx.t, fx.lat, fx.lon, fx.h, fx.sigma_h, fx.sigma_v).model(flt)
             self.counts["reinitialisations"] += 1
+        if v.run_velocity is not None:
+            # the run that ended the episode also measured the velocity: after a long dead
+            # reckoning M's is as stale as its position
+            vel, cov = v.run_velocity
+            self._dx = self._dx + flt.update(RunVelocity(vel, cov).model(flt))
+            m = PositionFix(fx.t, fx.lat, fx.lon, fx.h, fx.sigma_h, fx.sigma_v).model(flt)
         if v.apply:
             if nis_v <= self._gate_v:
                 self._dx = self._dx + flt.update(m)
