@@ -406,6 +406,8 @@ class Integrity:
     run_s : s a run of fixes must span before it may end an episode
     run_min_fixes : fixes a run needs at least
     run_max_s : s of the most recent fixes a run keeps
+    innovation_windows : numbers of recent fixes whose whitened innovations must sum to
+        about zero (a drag passes each fix's gate but pulls every one the same way)
     velocity_span_s : s of a run's last fixes whose own velocity is given to the navigator
         when the run ends an episode
     onset_s : s of fixes after an episode opens that characterise the fault (a smooth fault
@@ -429,6 +431,7 @@ class Integrity:
     run_min_fixes: int = 5
     run_max_s: float = 30.0
     onset_s: float = 3.0
+    innovation_windows: tuple = (4, 8, 16, 32)
     velocity_span_s: float = 2.0
     reinit_after_s: float = 20.0
     outage_s: float = 2.0

@@ -455,6 +455,16 @@ class InsGnssFilter:
         (the noise scale and the vibration factor included)."""
         return self._q_white[IV] * self.q_scale * self.vibration[1]
 
+    def acceleration_sigma(self) -> float:
+        """Horizontal acceleration error σ the covariance allows, m/s²: the specific force
+        against the attitude error (``|f^n × ψ|``) and the accelerometer bias."""
+        f = self._f_n
+        Pp = self.P[IP, IP]
+        # the horizontal rows of [f×]ψ: E = f_N ψ_U − f_U ψ_N, N = f_U ψ_E − f_E ψ_U
+        A = np.array([[0.0, -f[2], f[1]], [f[2], 0.0, -f[0]]])
+        var = float(np.trace(A @ Pp @ A.T)) / 2.0 + float(np.trace(self.P[IBA, IBA])) / 3.0
+        return float(np.sqrt(max(var, 0.0)))
+
     @property
     def t_true(self) -> float:
         """True time of the state: the IMU stamp plus the whole time offset, s."""

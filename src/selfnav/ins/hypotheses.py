@@ -97,6 +97,7 @@ class Verdict:
     excluded_since: float | None = None  # fused fixes after this time are now excluded
     widen: np.ndarray | None = None      # open M's position σ to this offset first (INS fault)
     run_velocity: tuple | None = None    # (velocity ENU, cov) the run of fixes shows
+    add_R: np.ndarray | None = None      # 2×2 added to the fix's horizontal noise
     vehicle: dict = field(default_factory=dict)
 
 
@@ -126,6 +127,7 @@ class FaultBank:
         self.streak = 0                 # consecutive rejected fixes (normal mode)
         self.used_streak = 0            # consecutive fused fixes (normal mode)
         self.t_healthy = None           # since when the fixes have been fused without a break
+        self.innov = []                 # whitened innovations of the recent fixes (normal mode)
         self._buf = []                  # IMU blocks since the last reference step
         self._t_step = -np.inf
         self._t_branch = -np.inf
@@ -217,6 +219,16 @@ class FaultBank:
             if self.streak >= self.cfg.integrity.rejections_to_open:
                 self._open(t - 0.0, reset=False)
             return Verdict(FixStatus.REJECTED, f"χ² gate (NIS {nis:.3g})", nis)
+        # a drag hides from each single test, not from their sum: the whitened innovations of
+        # the recent fixes must average to zero (a sequential test over 4 … 32 fixes)
+        wv = np.linalg.solve(np.linalg.cholesky(S), m_pos.r)
+        self.innov.append(wv)
+        self.innov = self.innov[-self.cfg.integrity.innovation_windows[-1]:]
+        drift = self._innovation_drift()
+        if drift is not None:
+            self._open(t, reset=False)
+            self.episode.kind = "drag"
+            return Verdict(FixStatus.REJECTED, drift, nis)
         self.flush()
         # the envelope: a fix outside a reference's is not accepted; and the separation M
         # would have from each reference after taking it
@@ -254,7 +266,21 @@ class FaultBank:
                 self.adapter.on_reference(t, q, age)
         return Verdict(FixStatus.USED, "", nis, apply=True)
 
-    def reference_gate(self, n_refs: int) -> float:
+    def _innovation_drift(self):
+        """The reason if the recent whitened innovations have a mean: ``|Σ ν|² / n`` above
+        the gate of the references' false-alarm rate for a window of the last ``n`` fixes."""
+        wins = self.cfg.integrity.innovation_windows
+        gate = self.reference_gate(len(wins) / 2.0)
+        for n in wins:
+            if len(self.innov) < n:
+                break
+            q = float(np.sum(np.sum(self.innov[-n:], axis=0) ** 2)) / n
+            if q > gate:
+                return (f"the last {n} fixes pull the same way (their innovations sum to "
+                        f"χ² {q:.3g}): a drag")
+        return None
+
+    def reference_gate(self, n_refs: float) -> float:
         """The χ² (2 dof) gate of the references' tests: ``false_alarms_per_hour`` shared
         among the tests of an hour (two per reference and fix)."""
         ig = self.cfg.integrity
@@ -311,7 +337,12 @@ class FaultBank:
                                f"{test['why']}, but outside the dead reckoning since "
                                f"{out[0]:.1f} s (χ² {out[1]:.3g})", nis)
         if test["white"] and test["moves"]:
-            still = self._fault_continues(ep, flt, test, t)
+            still, add = self._fault_continues(ep, flt, test, t)
+            if add is not None and in_gate:
+                # the fault and health cannot be told apart: the fix is fused with the fault's
+                # possible offset in its σ (no better than the dead reckoning, and as honest)
+                return Verdict(FixStatus.DEGRADED, f"{test['why']}; {still}", nis, apply=True,
+                               add_R=add)
             if still is not None:
                 return Verdict(FixStatus.SUSPECT if in_gate else FixStatus.REJECTED,
                                f"{test['why']}, but as the fault would: {still}", nis)
@@ -376,7 +407,7 @@ class FaultBank:
         more than the dead reckoning's own error). Returns the reason, or None."""
         f = ep.fault
         if f is None:
-            return None
+            return None, None
         dt = t - f["t"]
         J = np.array([1.0, dt])
         pred = f["coef"].T @ J                         # (2,) the fault's offset now
@@ -387,11 +418,14 @@ class FaultBank:
         q1 = float((o - pred) @ np.linalg.solve(S1, o - pred))
         q0 = float(o @ np.linalg.solve(S0, o))
         llr = 0.5 * (q0 - q1) - 0.5 * np.log(np.linalg.det(S1) / np.linalg.det(S0))
-        inside = float(pred @ np.linalg.solve(flt.P[:2, :2], pred)) <= 1.0
-        if inside or llr < -0.5 * self.gate:
-            return None
-        return (f"its offset {np.hypot(*o):.1f} m against the fault's {np.hypot(*pred):.1f} m "
-                f"(log-likelihood ratio {llr:+.1f})")
+        if llr < -0.5 * self.gate:
+            return None, None
+        why = (f"its offset {np.hypot(*o):.1f} m against the fault's {np.hypot(*pred):.1f} m "
+               f"(log-likelihood ratio {llr:+.1f})")
+        if float(pred @ np.linalg.solve(flt.P[:2, :2], pred)) <= 1.0:
+            return (f"the fault would be within the dead reckoning's σ ({why})",
+                    np.outer(pred, pred) + C_f)
+        return why, None
 
     def _outside_references(self, flt, m_pos, t):
         """``(t0, χ²)`` of the youngest mature reference whose envelope the fix is outside,
@@ -424,7 +458,11 @@ class FaultBank:
         o = np.array([f.offset for f in run])
         # the fixes' σ and the dead reckoning's own wander over the run (the velocity random
         # walk, which no quadratic absorbs): ``q_v T³/3``
-        wander = float(np.mean(flt.white_velocity_density()[:2])) * (tt[-1] - tt[0]) ** 3 / 3.0
+        T = tt[-1] - tt[0]
+        wander = float(np.mean(flt.white_velocity_density()[:2])) * T**3 / 3.0
+        # and what a quadratic cannot follow of an acceleration error that changes as the
+        # specific force turns against an attitude error (a long dead reckoning's heading)
+        wander += (flt.acceleration_sigma() * T * T / 8.0) ** 2
         s = np.sqrt(np.array([f.sigma for f in run]) ** 2 + wander)
         w = 1.0 / s**2
         tc = tt - tt[-1]
@@ -469,6 +507,7 @@ class FaultBank:
         return out
 
     def _open(self, t, reset, sep=0.0):
+        self.innov = []
         self.episode = Episode(t, reset=reset, kind="drag" if reset else "outliers",
                                max_separation_m=sep)
         self.run = []

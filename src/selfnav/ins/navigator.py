@@ -707,8 +707,10 @@ class Navigator:
             vel, cov = v.run_velocity
             self._dx = self._dx + flt.update(RunVelocity(vel, cov).model(flt))
             m = PositionFix(fx.t, fx.lat, fx.lon, fx.h, fx.sigma_h, fx.sigma_v).model(flt)
+        if v.add_R is not None:
+            m.R[:2, :2] += v.add_R
         if v.apply:
-            if nis_v <= self._gate_v:
+            if nis_v <= self._gate_v and v.add_R is None:
                 self._dx = self._dx + flt.update(m)
             else:
                 self._dx = self._dx + flt.update(m.rows([0, 1]))
