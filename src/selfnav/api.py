@@ -15,15 +15,13 @@ from selfnav import ins
 from selfnav.errors import SelfnavError, SelfnavWarning
 from selfnav.evaluation import evaluate as _evaluate_trajectories
 from selfnav.evaluation import load_road_polylines
-from selfnav.ins import calibrate
-from selfnav.ins.align import robust_init
 from selfnav.io.attitude_file import read_attitude
-from selfnav.io.imu import imu_segments, report_gaps
+from selfnav.io.imu import report_gaps
 from selfnav.io.readers import read_baro, read_gnss, read_imu, read_imu_positions
 from selfnav.latitude import LatitudeResult
 from selfnav.latitude import estimate_latitude as _estimate_latitude
 from selfnav.latitude import estimate_latitude_multiposition
-from selfnav.roads.aid import EkfRoadAid, start_on_roads
+from selfnav.roads.aid import EkfRoadAid
 from selfnav.roads.graph import RoadGraph, read_match_roads, read_roads
 from selfnav.io.fleet import Fleet, read_fleet
 from selfnav.roads.fleet import (FleetRun, MatchParams, match_files, match_track,
@@ -31,12 +29,9 @@ from selfnav.roads.fleet import (FleetRun, MatchParams, match_files, match_track
 from selfnav.seed004 import SeedConfig, run_seed
 from selfnav.solution import Solution, read_solution
 from selfnav.types import GnssData, ImuData, OdometerData, Trajectory
+from selfnav.ins.navigator import Navigator
 
 METHODS = ("ekf", "seed")
-#: a run that leaves more of its fixes unused than this warns (one line)
-REJECTION_WARNING = 0.2
-#: an IMU stretch between gaps shorter than this is not navigated, s
-MIN_SEGMENT_S = 10.0
 
 
 def estimate_latitude(imu: ImuData, *, method: str = "optimal", **kw) -> LatitudeResult:
@@ -64,30 +59,9 @@ def _check_overlap(imu: ImuData, gnss: GnssData) -> None:
                            "time bases (GPS seconds of week vs seconds of day?)")
 
 
-def filter_config(grade: str = "auto", *, lever_arm_m=None, nhc_lever_m=None,
-                  window_test: bool = True, nhc: bool = True, shadows: bool = True,
-                  mount_states: bool = False, scale_factors: bool | None = None,
-                  **fields) -> "ins.FilterConfig":
-    """The filter configuration :func:`navigate` starts from for these options (see its
-    parameters); ``fields`` override any :class:`~selfnav.ins.FilterConfig` field by name.
-
-    ``grade="auto"`` is the consumer preset as the prior (the widest), to be raised to what
-    the data shows; without ``lever_arm_m`` the lever arm is estimated (3 states).
-    """
-    opts = dict(robust=window_test, nhc=nhc, use_shadows=shadows, mount_states=mount_states)
-    if lever_arm_m is not None:
-        opts["lever_arm_b"] = np.asarray(lever_arm_m, dtype=float)
-    else:
-        opts["lever_arm"] = True
-    if nhc_lever_m is not None:
-        opts["nhc_lever_b"] = np.asarray(nhc_lever_m, dtype=float)
-    if scale_factors is not None:
-        opts["scale_factors"] = bool(scale_factors)
-    key = "consumer" if str(grade).lower().strip() == "auto" else grade
-    cfg = ins.FilterConfig.for_grade(key, **opts, **fields)
-    if str(grade).lower().strip() == "auto":
-        cfg.imu.grade = "auto (consumer prior)"
-    return cfg
+def filter_config(grade: str = "auto", **kw) -> "ins.FilterConfig":
+    """The navigator's configuration for these options (:func:`selfnav.ins.navigator_config`)."""
+    return ins.navigator_config(grade, **kw)
 
 
 def initial_state(reference, imu: ImuData, cfg: "ins.FilterConfig") -> dict:
@@ -110,205 +84,97 @@ def initial_state(reference, imu: ImuData, cfg: "ins.FilterConfig") -> dict:
                        list(ini.given_att_sigma))}
 
 
+def navigator(imu: ImuData | None = None, roads=None, *, grade: str = "auto", config=None,
+              init=None, smooth: bool = False, **options) -> "ins.Navigator":
+    """The :class:`selfnav.Navigator` :func:`navigate` runs: the configuration of ``grade`` and
+    ``options`` (:func:`selfnav.ins.navigator_config` keywords, ``out_rate_hz``), the road aid
+    of ``roads`` (a map or its path), the start state ``init`` (a trajectory or file, needs
+    ``imu`` for its start time)."""
+    rate = options.pop("out_rate_hz", ins.DEFAULT_OUT_RATE_HZ)
+    cfg = config or ins.navigator_config(grade, **options)
+    graph = _as_roads(roads)
+    aid = EkfRoadAid(graph) if graph is not None else None
+    start = None if init is None else initial_state(init, imu, cfg)
+    return ins.Navigator(cfg, road_aid=aid, init=start, out_rate_hz=rate, smoother=smooth,
+                         imu_time_offset_s=options.get("imu_time_offset_s"))
+
+
 def navigate(imu: ImuData, gnss: GnssData | None, roads=None, *, method: str = "ekf",
-             smooth: bool = False, grade: str = "auto", config: "ins.FilterConfig | None" = None,
-             lever_arm_m=None, nhc_lever_m=None, imu_time_offset_s: float | None = None,
-             window_test: bool = True, nhc: bool = True, shadows: bool = True,
-             mount_states: bool = False, scale_factors: bool | None = None,
-             matcher: str = "seed", ins_datum: str = "sk42", declination_deg: float | None = None,
-             init=None, progress=None, odometer: OdometerData | None = None) -> Solution:
-    """Navigate a vehicle with an IMU and GNSS, and optionally a road map.
-
-    With the defaults the EKF calibrates itself (DESIGN §10; :mod:`selfnav.ins.calibrate`):
-    the IMU noise from the still segments, the IMU–GNSS time offset from the gyro heading
-    against the GNSS course (then refined as a state), the lever arm as three states, and the
-    process-noise scale online from trusted fixes.
-
-    Parameters
-    ----------
-    imu : ImuData
-    gnss : GnssData
-        Fixes in WGS-84 (readers convert other datums at load time).
-    roads : RoadGraph, path or None
-        OpenStreetMap roads: the EKF gets the road aid (:mod:`selfnav.roads.aid`); the seed
-        method needs them.
-    method : {"ekf", "seed"}
-        The error-state EKF (+ RTS smoother with ``smooth``), or seed 004's two loops.
-    grade : str
-        IMU noise prior of the EKF: ``auto`` or a grade of :data:`selfnav.sensors.GRADES`;
-        where the data is noisier, the measured noise wins (one warning says so).
-    config : FilterConfig, optional
-        A full filter configuration (then ``grade`` and the switches below are ignored; the
-        noise is still checked against the data).
-    lever_arm_m : (3,), optional
-        IMU → antenna, body RFU, m; not given: estimated (3 states).
-    nhc_lever_m : (3,), optional
-        IMU → the point where the non-holonomic constraint holds (rear axle), body RFU, m.
-    imu_time_offset_s : float, optional
-        Added to the IMU time stamps (after the reader's own); not given: estimated.
-    window_test, nhc, shadows, mount_states, scale_factors : bool
-        The outlier window test, the non-holonomic constraint, the shadow dead reckoning,
-        the mounting-angle states, the scale-factor states (None: the grade's default).
-    matcher, ins_datum, declination_deg :
-        ``method="seed"`` options (:class:`selfnav.seed004.SeedConfig`).
-    init : Trajectory, Solution or path, optional
-        Start from this state (:func:`initial_state`) instead of an in-motion alignment
-        from GNSS; then ``gnss`` may be None (free inertial navigation with the vehicle
-        constraints).
-    progress : callable(fraction), optional
-    odometer : OdometerData, optional
-        Wheel speed on the IMU's clock (shifted with the IMU stamps): the EKF adds the
-        scale-factor state and a forward-speed update; the seed loop takes its travel (13)
-        from it, scaled by a factor it learns from the healthy periods.
-
-    Returns
-    -------
-    Solution
-        ``stats`` holds the counts the command line prints (fixes used and rejected, ...),
-        ``imu_time_offset_s`` (the total offset applied to the IMU stamps, estimate included)
-        and ``lever_arm_m``; ``columns`` the per-row ``sigma_h_m`` and ``gnss`` status.
-    """
+             smooth: bool = False, progress=None, odometer: OdometerData | None = None,
+             **options) -> Solution:
+    """Navigate with an IMU and GNSS (and a road map): the loop over :class:`selfnav.Navigator`
+    that ``selfnav navigate`` runs — every row from the past only, except with ``smooth``
+    (the RTS smoother: post-processing). ``options``: :func:`navigator` keywords (``grade``,
+    ``lever_arm_m``, ``imu_time_offset_s``, ``nhc``, ``init``, ``out_rate_hz``, ...); with
+    ``method="seed"`` seed 004's two loops (:func:`navigate_seed`)."""
     if method not in METHODS:
         raise SelfnavError(f"unknown method '{method}' (use {' or '.join(METHODS)})")
-    imu = report_gaps(imu)          # short gaps bridged, each long one said in one line
-    if gnss is None:
-        if init is None:
-            raise SelfnavError("without GNSS the navigator needs an initial state (--init FILE)")
-        gnss = GnssData(np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0), source="none")
-    else:
-        _check_overlap(imu, gnss)
-    graph = _as_roads(roads)
     if method == "seed":
-        if graph is None:
-            raise SelfnavError("--method seed needs a road map: --map ROADS (.osm/.osm.pbf)")
-        cfg = SeedConfig(matcher=matcher, ins_datum=ins_datum,
-                         declination=None if declination_deg is None else np.radians(declination_deg))
-        odo = None if odometer is None else odometer.shifted(
-            float(imu.meta.get("time_offset_s", 0.0)))
-        r = run_seed(imu, gnss, graph, cfg, progress=progress, odometer=odo)
-        stats = {k: v for k, v in r.stats.items() if k != "t_start"}
-        # the seed loop has no covariance
-        return Solution(r.trajectory, None, {}, stats, f"seed ({matcher})", r)
-    cfg = config or filter_config(grade, lever_arm_m=lever_arm_m, nhc_lever_m=nhc_lever_m,
-                                  window_test=window_test, nhc=nhc, shadows=shadows,
-                                  mount_states=mount_states, scale_factors=scale_factors)
-    applied = float(imu.meta.get("time_offset_s", 0.0))
-    stats = {}
-    lag = calibrate.estimate_velocity_lag(gnss) if cfg.gnss.use_velocity and len(gnss) else None
-    if lag:
-        gnss = calibrate.shift_velocity(gnss, lag)
-        stats["gnss_velocity_lag_s"] = lag
-    if imu_time_offset_s is None and len(gnss):
-        est = calibrate.estimate_time_offset(imu, gnss)
-        if est is not None:
-            imu = imu.shifted(est[0])
-            applied += est[0]
-            cfg = cfg.updated(time_offset=True, time_offset_sigma=max(est[1], 0.01))
-            stats["imu_time_offset_prepass_s"] = est[0]
-        else:
-            cfg = cfg.updated(time_offset=True, time_offset_sigma=0.1)
-    elif imu_time_offset_s:
-        imu = imu.shifted(float(imu_time_offset_s))
-        applied += float(imu_time_offset_s)
-    cfg, measured, notes = calibrate.calibrated_config(cfg, imu, gnss)
-    if odometer is not None:
-        cfg = cfg.updated(odometer=True)
-    if notes and str(grade).lower() != "auto" and config is None:
-        warnings.warn(f"the IMU is noisier than the '{grade}' preset says ({'; '.join(notes)}): "
-                      "using the measured noise", SelfnavWarning, stacklevel=2)
-    # an IMU gap longer than a few samples ends a segment: each is navigated on its own and
-    # re-initialised from GNSS after the gap; no row stands inside a gap
-    odo_all = None if odometer is None else odometer.shifted(applied)
-    results, skipped = [], []
-    segments = imu_segments(imu)
-    for n_seg, sl in enumerate(segments):
-        part = imu.select(sl)
-        span = (part.t[0], part.t[-1])
-        g_part = gnss.select((gnss.t >= span[0]) & (gnss.t <= span[1]))
-        if part.duration < MIN_SEGMENT_S or (init is None or n_seg) and len(g_part) < 10:
-            skipped.append(f"IMU samples {span[0]:.3f}…{span[1]:.3f} s are too short or have "
-                           "too few fixes to navigate")
-            continue
-        aid = EkfRoadAid(graph, g_part) if graph is not None else None
-        try:
-            if init is not None and n_seg == 0:
-                start = initial_state(init, part, cfg)
-            elif graph is not None:
-                # start only after a run of fixes that look healthy without an INS and also
-                # lie on the map's roads (a smooth drift from power-on looks healthy)
-                start = start_on_roads(part, g_part, graph, cfg)
-            else:
-                # start only after a run of fixes that look healthy without an INS (an outlier
-                # window at start-up must not seed the navigator hundreds of metres off)
-                start = robust_init(part, g_part, cfg=cfg)
-        except SelfnavError as e:
-            skipped.append(f"IMU samples {span[0]:.3f}…{span[1]:.3f} s: {e}")
-            continue
-        prog = None if progress is None else (
-            lambda x, a=n_seg, n=len(segments): progress((a + x) / n))
-        odo = None if odo_all is None else odo_all.select(
-            (odo_all.t >= span[0]) & (odo_all.t <= span[1]))
-        results.append(ins.run_filter(part, g_part, cfg, init=start, smooth=smooth,
-                                      progress=prog, road_aid=aid, odometer=odo))
-    if not results:
-        if len(segments) == 1:
-            raise SelfnavError(skipped[0].split(": ", 1)[-1])
-        raise SelfnavError("no stretch of the IMU record between its gaps could be navigated "
-                           f"({skipped[0]})")
-    for why in skipped:
-        warnings.warn(f"{why}: no solution there", SelfnavWarning, stacklevel=2)
-    res = ins.concatenate_results(results)
-    stats["imu_segments"] = len(results)
-    # without a given lever arm, the antenna is the point the data defines (the lever arm is
-    # an estimate); rows at true time (the residual time-offset state)
-    point = "antenna" if cfg.states.lever_arm else "imu"
-    traj = ins.output_trajectory(res, antenna=point == "antenna")
-    if res.time_offset is not None:
-        applied += float(res.time_offset[-1])
-    stats["position_of"] = point
-    stats.update(res.stats)
-    stats["suspect_fixes"] = int(np.sum(res.mode == 1))
-    stats["smoothed"] = bool(res.smoothed)
-    stats["imu_time_offset_s"] = applied
-    stats["imu_time_offset_format_s"] = float(imu.meta.get("format_time_offset_s", 0.0))
-    stats["lever_arm_m"] = [float(x) for x in (res.lever_arm[-1] if res.lever_arm is not None
-                                               else cfg.gnss.lever_arm_b)]
-    stats["noise"] = {"grade": cfg.imu.grade, "arw_deg_per_sqrt_h": float(np.degrees(cfg.imu.arw) * 60),
-                      "vrw_m_per_s_per_sqrt_h": float(cfg.imu.vrw * 60),
-                      "still_s": measured.still_s, "raised": notes}
-    if res.odometer_scale is not None and len(res.odometer_scale):
-        stats["odometer_scale_factor"] = float(res.odometer_scale[-1])
-    if res.mounting is not None and len(res.mounting):
-        stats["mounting_deg"] = [float(x) for x in np.degrees(res.mounting[-1])]
-    st = res.fix_log["status"]
-    used = np.isin(st, ("used", "used-h", "used-v"))
-    stats["rejection_rate"] = float(1.0 - used.sum() / max(1, np.sum(st != "before-init"))) if len(st) else 0.0
-    if stats["rejection_rate"] > REJECTION_WARNING and len(st) >= 20:
-        warnings.warn(f"{100 * stats['rejection_rate']:.0f} % of the GNSS fixes were not used: the "
-                      "fixes and the IMU disagree (outliers, wrong lever arm or time base, or a "
-                      "noise model too optimistic); see --fix-log", SelfnavWarning, stacklevel=2)
-    cols = {"sigma_h_m": res.sigma_h, "gnss": res.gnss_status}
-    return Solution(traj, res.sigma_enu, cols, stats, "ekf+map" if graph is not None else "ekf",
-                    res)
+        return navigate_seed(imu, gnss, roads, progress=progress, odometer=odometer, **options)
+    imu = report_gaps(imu)          # short gaps bridged, each long one said in one line
+    if gnss is None and options.get("init") is None:
+        raise SelfnavError("without GNSS the navigator needs an initial state (--init FILE)")
+    if gnss is not None:
+        _check_overlap(imu, gnss)
+    nav = navigator(imu, roads, smooth=smooth, **options)
+    odo = None if odometer is None else odometer.shifted(0.0)
+    ins.feed(nav, imu, gnss, odometer=odo, progress=progress)
+    res = nav.result(smooth)
+    fmt = float(imu.meta.get("format_time_offset_s", 0.0))
+    stats = {**res.stats, "smoothed": res.smoothed, "episodes": res.episodes,
+             "imu_time_offset_format_s": fmt,
+             "imu_time_offset_s": fmt + res.stats.get("imu_time_offset_s", 0.0)}
+    for why in res.stats.get("restarts", []):
+        warnings.warn(f"{why}: the navigator started again after it", SelfnavWarning, stacklevel=2)
+    cols = {"sigma_h_m": res.sigma_h, "status": res.status,
+            "protection_level_m": res.protection_level}
+    return Solution(res.trajectory, res.sigma_enu, cols, stats,
+                    "ekf+map" if roads is not None else "ekf", res)
+
+
+def navigate_seed(imu: ImuData, gnss: GnssData, roads, *, matcher: str = "seed",
+                  ins_datum: str = "sk42", declination_deg: float | None = None,
+                  progress=None, odometer: OdometerData | None = None, **unused) -> Solution:
+    """Seed 004's two-loop road navigator (:mod:`selfnav.seed004`); options of the EKF
+    navigator are refused by name rather than ignored."""
+    given = sorted(k for k, v in unused.items() if v is not None and k != "grade")
+    if given:
+        raise SelfnavError(f"--method seed does not take {', '.join(given)} (EKF options)")
+    graph = _as_roads(roads)
+    if graph is None:
+        raise SelfnavError("--method seed needs a road map: --map ROADS (.osm/.osm.pbf)")
+    if gnss is None:
+        raise SelfnavError("--method seed needs GNSS fixes (--gnss FILE)")
+    imu = report_gaps(imu)
+    _check_overlap(imu, gnss)
+    cfg = SeedConfig(matcher=matcher, ins_datum=ins_datum,
+                     declination=None if declination_deg is None else np.radians(declination_deg))
+    odo = None if odometer is None else odometer.shifted(float(imu.meta.get("time_offset_s", 0.0)))
+    r = run_seed(imu, gnss, graph, cfg, progress=progress, odometer=odo)
+    stats = {k: v for k, v in r.stats.items() if k != "t_start"}
+    # the seed loop has no covariance
+    return Solution(r.trajectory, None, {}, stats, f"seed ({matcher})", r)
 
 
 def write_fix_log(path, solution: Solution):
     """One row per GNSS fix of a navigator run: ``t, status, reason, nis_h, nis_v, nis_vel,
-    anchored`` (written atomically)."""
+    excluded`` (status: :class:`selfnav.ins.FixStatus`; excluded: fused, then found faulty by
+    the fault bank; written atomically)."""
     from selfnav.io.csvio import write_csv
 
     log = getattr(solution.detail, "fix_log", None)
     if log is None:
         raise SelfnavError("this method keeps no fix log (use --method ekf)")
-    cols = {"t": log["t"], "status": log["status"],
+    cols = {"t": np.asarray(log["t"], float), "status": log["status"],
             "reason": np.array([str(r).replace(",", ";") or "-" for r in log["reason"]], dtype=object),
-            "nis_h": log["nis_h"], "nis_v": log["nis_v"], "nis_vel": log["nis_vel"],
-            "anchored": np.asarray(log["anchored"], int)}
+            "nis_h": np.asarray(log["nis_h"], float), "nis_v": np.asarray(log["nis_v"], float),
+            "nis_vel": np.asarray(log["nis_vel"], float),
+            "excluded": np.asarray(log["excluded"], int)}
+    statuses = ", ".join(s.value for s in ins.FixStatus)
     return write_csv(path, cols, comments=["selfnav navigate: one row per GNSS fix",
-                                           "status: used, used-h (height rejected), used-v (height "
-                                           "only), degraded, rejected, before-init"],
+                                           f"status: {statuses}"],
                      fmt={"t": "%.3f", "nis_h": "%.4g", "nis_v": "%.4g", "nis_vel": "%.4g",
-                          "anchored": "%d"})
+                          "excluded": "%d"})
 
 
 def match(gnss: GnssData, roads, *, sigma_m: float | None = None,
@@ -620,6 +486,7 @@ def as_trajectory(x) -> Trajectory:
 __all__ = ["read_imu", "read_imu_positions", "read_gnss", "read_roads", "read_solution",
            "read_attitude", "read_fleet", "estimate_latitude", "navigate", "match", "match_fleet",
            "match_files", "evaluate", "filter_config", "initial_state", "write_fix_log",
+           "navigator", "navigate_seed", "Navigator",
            "Solution", "allan_noise", "latitude_requirements", "latitude_error_budget",
            "evaluate_report", "map_coverage", "check_map_covers", "imu_gaps", "simulate_files",
            "run_montecarlo", "as_trajectory", "read_baro", "estimate_attitude",

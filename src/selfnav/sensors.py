@@ -406,7 +406,8 @@ def drift_errors(n, dt, sigma, tau, rng, *, start="zero"):
 def outlier_errors(kind, n, dt, sigma, tau, rng):
     """``n`` horizontal outlier errors (E, N metres) at interval ``dt`` of an
     :class:`OutlierWindow` kind: white, gm (first-order Gauss–Markov from its steady state),
-    drift / drift-jump (:func:`drift_errors` from zero / its steady state)."""
+    drift / drift-jump (:func:`drift_errors` from zero / its steady state), drag
+    (:func:`drag_errors`)."""
     if kind == "gm":
         a = np.exp(-dt / tau)
         z = rng.normal(size=(n, 2)) * sigma * np.sqrt(1 - a * a)
@@ -415,7 +416,23 @@ def outlier_errors(kind, n, dt, sigma, tau, rng):
         return rng.normal(size=(n, 2)) * sigma
     if kind in ("drift", "drift-jump"):
         return drift_errors(n, dt, sigma, tau, rng, start="zero" if kind == "drift" else "stationary")
-    raise SelfnavError(f"unknown outlier kind '{kind}' (white, gm, drift or drift-jump)")
+    if kind == "drag":
+        return drag_errors(n, dt, rng)
+    raise SelfnavError(f"unknown outlier kind '{kind}' (white, gm, drift, drift-jump or drag)")
+
+
+#: the range of a spoofer's drag rate, m/s (:func:`drag_errors`)
+DRAG_RATES = (0.5, 3.0)
+
+
+def drag_errors(n, dt, rng, rate=None):
+    """A spoofer's drag: a linear ramp from zero in one direction at ``rate`` m/s (drawn
+    uniformly in :data:`DRAG_RATES` when None; the direction uniformly), ``n`` errors at
+    interval ``dt``. It is switched off at the window's end (the caller stops adding it)."""
+    rate = float(rng.uniform(*DRAG_RATES)) if rate is None else float(rate)
+    a = float(rng.uniform(0.0, 2.0 * np.pi))
+    s = rate * dt * np.arange(1, n + 1)
+    return np.column_stack([s * np.sin(a), s * np.cos(a)])
 
 
 def random_outlier_windows(t0, t1, count, rng, *, max_duration=300.0, sigma=200.0,

@@ -87,20 +87,20 @@ def register(app: typer.Typer) -> None:
             "--fix-log", parser=opt.file_path, metavar="FILE",
             help="Write one row per GNSS fix: t, status, reason, NIS (a FILE, written "
                  "atomically).")] = None,
-        window_test: Annotated[bool, typer.Option(
-            "--window-test/--no-window-test",
-            help="The outlier window test (off: only the χ² gate).")] = True,
         nhc: Annotated[bool, typer.Option(
             "--nhc/--no-nhc", help="Non-holonomic constraint (a car).")] = True,
-        shadows: Annotated[bool, typer.Option(
-            "--shadows/--no-shadows", help="Shadow dead reckoning against drifting GNSS.")] = True,
-        scale_factors: Annotated[bool, typer.Option(
+        scale_factors: Annotated[Optional[bool], typer.Option(
             "--scale-factors/--no-scale-factors",
-            help="Estimate scale factors (21 states).")] = False,
+            help="Estimate scale factors and axis misalignment (default: as the grade "
+                 "says; on for auto, consumer and industrial).")] = None,
         mount_states: Annotated[bool, typer.Option(
             "--mount-states/--no-mount-states",
             help="Estimate the IMU's pitch and yaw to the vehicle (2 states, seen by the "
                  "NHC).")] = False,
+        out_rate: Annotated[float, typer.Option(
+            "--out-rate", metavar="HZ", min=0.0,
+            help="Output rows per second, on a regular grid of the GNSS time (0: a row at "
+                 "every IMU sample).")] = 10.0,
         nhc_lever: Annotated[str, typer.Option(
             metavar="X,Y,Z", help="IMU to the rear-axle centre (where the NHC holds), body RFU, m: "
                  "x,y,z.")] = "0,0,0",
@@ -156,14 +156,19 @@ def register(app: typer.Typer) -> None:
             task = bar.add_task("navigating", total=1.0)
             progress = lambda x: bar.update(task, completed=x)  # noqa: E731
         try:
-            sol = api.navigate(data, g, graph, method=method, smooth=smooth, grade=grade,
-                               lever_arm_m=lever, nhc_lever_m=nhc_arm,
-                               imu_time_offset_s=imu_time_offset,
-                               window_test=window_test, nhc=nhc, shadows=shadows,
-                               mount_states=mount_states, scale_factors=scale_factors or None,
-                               matcher=matcher, ins_datum=ins_datum,
-                               declination_deg=declination_deg, init=init, progress=progress,
-                               odometer=odo)
+            if method == "seed":
+                sol = api.navigate(data, g, graph, method=method, matcher=matcher,
+                                   ins_datum=ins_datum, declination_deg=declination_deg,
+                                   progress=progress, odometer=odo)
+            else:
+                extra = {} if scale_factors is None else {
+                    "scale_factors": scale_factors, "misalignment": scale_factors}
+                sol = api.navigate(data, g, graph, smooth=smooth, grade=grade,
+                                   lever_arm_m=lever, nhc_lever_m=nhc_arm,
+                                   imu_time_offset_s=imu_time_offset, nhc=nhc,
+                                   mount_states=mount_states, init=init,
+                                   out_rate_hz=out_rate, progress=progress, odometer=odo,
+                                   **extra)
         except np.linalg.LinAlgError as e:   # a safety net: one line, not a traceback
             from selfnav.io.imu import MAX_BRIDGE_SAMPLES, imu_gaps
 
@@ -198,15 +203,16 @@ def register(app: typer.Typer) -> None:
             print(f"  seed 004 slow loop ({matcher}): k_M {s['k_m']}, "
                   f"{s['healthy_fixes']} fixes judged healthy")
             return
-        print(f"  GNSS fixes: {s['accepted']} used, {s['rejected']} rejected, "
-              f"{s['before_init']} before initialisation, "
-              f"{s['degraded_updates']} used with inflated σ while suspect")
-        print(f"  IMU time offset {s['imu_time_offset_s']:+.3f} s (applied to its stamps, "
-              f"estimate included); lever arm {', '.join(f'{x:.2f}' for x in s['lever_arm_m'])} m "
-              f"(RFU); solution at the {s['position_of']}")
-        if s.get("shadow_resets"):
-            print(f"  drifting GNSS caught: {s['shadow_resets']} reset(s) to the shadow "
-                  "dead reckoning")
+        c = s["fix_status"]
+        print(f"  GNSS fixes: {c['used']} used, {c['degraded']} used in part, "
+              f"{c['rejected']} rejected, {c['suspect']} held while suspect, "
+              f"{c['aligning']} before the start; {s['fixes_excluded_later']} excluded later")
+        print(f"  IMU time offset {s['imu_time_offset_s']:+.3f} s (estimate included); lever "
+              f"arm {', '.join(f'{x:.2f}' for x in s['lever_arm_m'])} m (RFU)")
+        eps = [e for e in s.get("episodes", []) if e["kind"] != "outage"]
+        if eps:
+            kinds = ", ".join(f"{e['kind']} {e['start_s']:.1f}-{(e['end_s'] or 0):.1f} s" for e in eps[:3])
+            print(f"  fault episodes: {len(eps)} ({kinds}{', ...' if len(eps) > 3 else ''})")
         if "mounting_deg" in s:
             print(f"  IMU mounting to the vehicle: pitch {s['mounting_deg'][0]:.2f}°, "
                   f"yaw {s['mounting_deg'][1]:.2f}°")

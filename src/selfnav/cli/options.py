@@ -239,12 +239,12 @@ Seed = Annotated[int, typer.Option("--seed", min=0, help="Random seed (≥ 0): t
 HELP_PANELS = {
     "navigate": {
         "Inputs": ("imu", "gnss", "map_", "init", "odometer", "mag", "imu_format",
-                   "gnss_format", "gnss_datum"),
+                   "gnss_format", "gnss_datum", "imu_axes", "imu_mount"),
         "Outputs": ("out", "out_rate", "out_datum", "fix_log", "as_json"),
         "Method": ("method", "smooth", "grade"),
         "Sensor geometry and timing (estimated when not given)": (
             "lever_arm", "imu_time_offset", "nhc_lever", "mount_states", "scale_factors"),
-        "Outlier defence and vehicle constraints": ("window_test", "shadows", "nhc"),
+        "Vehicle constraints": ("nhc",),
         "--method seed only": ("matcher", "ins_datum", "declination_deg"),
     },
     "moving": {

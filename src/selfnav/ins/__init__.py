@@ -1,19 +1,18 @@
 """The inertial navigator, one stage a module (DESIGN §5, §7, §9)::
 
-    strapdown  →  align  →  ekf  →  guard  →  navigator
-    (mechanization, (initial   (error-state  (outlier defence:  (streaming and batch runs,
-     seed 004 fast   state)     filter, RTS   window test,       fix bookkeeping)
-     loop)                      smoother)     shadow DR)
+    strapdown → ekf + measurements → startup → hypotheses (+ policy) → navigator
+    (mechanization,  (error-state     (causal     (the fault bank:       (the causal loop:
+     seed 004 fast    filter, RTS,     start)      references, episodes,  Navigator.add_imu,
+     loop)            the aids)                    protection level)      add_fix, rows)
 
-with :mod:`selfnav.ins.config` holding the grouped configuration every stage reads. Each module
-imports only those to its left (and ``config``).
+with :mod:`selfnav.ins.config` holding the grouped configuration every stage reads and
+:mod:`selfnav.ins.calibrate` the noise and timing from the data. Each module imports only those
+to its left (and ``config``).
 """
-from selfnav.ins.config import FilterConfig
+from selfnav.ins.config import FilterConfig, navigator_config
 from selfnav.ins.ekf import InsGnssFilter
-from selfnav.ins.navigator import (FilterResult, StreamingNavigator, concatenate_results,
-                                  fixes_sigma,
-                                  init_from_gnss, output_trajectory, run_filter)
+from selfnav.ins.navigator import DEFAULT_OUT_RATE_HZ, NavigatorResult, Navigator, NavState, feed
+from selfnav.ins.policy import FixDecision, FixStatus, NavStatus
 
-__all__ = ["FilterConfig", "InsGnssFilter", "FilterResult", "StreamingNavigator",
-           "init_from_gnss", "run_filter", "output_trajectory", "fixes_sigma",
-           "concatenate_results"]
+__all__ = ["FilterConfig", "navigator_config", "InsGnssFilter", "Navigator", "NavState",
+           "NavigatorResult", "FixDecision", "FixStatus", "NavStatus", "DEFAULT_OUT_RATE_HZ", "feed"]

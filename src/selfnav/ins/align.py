@@ -609,14 +609,16 @@ def healthy_start(t, xy, sigma, window=20):
     return None
 
 
-def robust_init(imu, gnss, graph=None, *, sigma=10.0, window=20, cfg: FilterConfig | None = None):
+def robust_init(imu, gnss, graph=None, *, sigma=10.0, window=20, cfg: FilterConfig | None = None,
+                require_healthy: bool = False):
     """The in-motion alignment (:func:`init_from_gnss`) started only after the first
     run of healthy fixes (:func:`healthy_start`): an outlier window at start-up (seed 004: up
     to 5 min, 200 m σ, white or drifting) must not seed the navigator hundreds of metres off.
     ``gnss`` is WGS-84; ``sigma`` stands for a fix without σ; with ``cfg`` the σ the filter
     believes (its floor) is used. No healthy run at all: the alignment over every fix. With
     ``graph`` the heading is the nearest road direction and the vertical velocity zero
-    (seed (15) at the start)."""
+    (seed (15) at the start). ``require_healthy``: no start without a healthy run (the
+    causal start-up waits for one)."""
     fc = cfg if cfg is not None else FilterConfig.for_grade("consumer")
     fc = fc.updated(window=max(fc.outliers.window, 15))
     sig = (np.asarray(gnss.sigma_m, float) if gnss.sigma_m is not None
@@ -627,6 +629,8 @@ def robust_init(imu, gnss, graph=None, *, sigma=10.0, window=20, cfg: FilterConf
     xy = enu_offset(gnss.lat[0], gnss.lon[0], 0.0, gnss.lat, gnss.lon, 0.0)[:, :2]
     k = healthy_start(gnss.t, xy, sig, window)
     if k is None:
+        if require_healthy:
+            raise SelfnavError(f"no run of {window} healthy GNSS fixes yet")
         return dict(init_from_gnss(imu, gnss, fc, sig))
     sub = slice(k, None)
     g2 = gnss.select(sub)

@@ -70,6 +70,7 @@ class MeasuredNoise:
     """What :func:`measure_noise` found (SI units; ``None`` where nothing was still)."""
 
     still_s: float
+    vibration: tuple | None = None       # (gyro, accelerometer) vibration_level at rest
     arw: float | None = None
     vrw: float | None = None
     gyro_bias: np.ndarray | None = None
@@ -136,6 +137,28 @@ def _gnss_stopped(gnss: GnssData, t0, t1) -> bool:
     return bool(np.all(spread <= 3.0 * sig + 0.5))
 
 
+def vibration_level(w, f):
+    """The vibration an IMU block carries: the mean over axes of the sample-to-sample
+    variance ``var(Δx)/2`` of the rates and of the specific force (smooth motion hardly moves
+    it; engine and road vibration do)."""
+    if len(w) < 4:
+        return None
+    return (float(np.mean(np.var(np.diff(w, axis=0), axis=0))) / 2.0,
+            float(np.mean(np.var(np.diff(f, axis=0), axis=0))) / 2.0)
+
+
+def vibration_scale(level, reference, cap: float):
+    """Process-noise factors ``(k_g, k_a)`` of a block whose vibration ``level`` is this many
+    times the ``reference`` (the still segment's, or the white noise the model assumes):
+    vibration is noise to a strapdown INS — aliased into the band, rectified into bias,
+    coning and sculling — and its power is what the factor follows (at least 1, at most
+    ``cap``)."""
+    if level is None or reference is None:
+        return 1.0, 1.0
+    return tuple(float(min(max(lv / max(ref, 1e-30), 1.0), cap))
+                 for lv, ref in zip(level, reference))
+
+
 def _white_density(x, dt):
     """Conservative white-noise density of a rate record: ``max σ_A(τ)·√τ`` on WHITE_TAU;
     ``None`` when the record is not noise at rest (the density grows with τ: motion, a drift)."""
@@ -176,8 +199,9 @@ def measure_noise(imu: ImuData, still: np.ndarray) -> MeasuredNoise:
     g = float(normal_gravity(lat if lat is not None else np.radians(45.0)))
     # the still mean is bias + Earth rate (direction unknown): σ covers the Earth-rate part
     bias_sigma = math.hypot(OMEGA_EARTH, float(np.max(np.abs(w_mean))) * 0.1)
+    vib = vibration_level(imu.omega_ib_b[idx], imu.f_ib_b[idx])
     # the median over the still runs: one run with a door slammed does not decide
-    return MeasuredNoise(float(sum(weights) * dt), float(np.median(dens_g)),
+    return MeasuredNoise(float(sum(weights) * dt), vib, float(np.median(dens_g)),
                          float(np.median(dens_a)), w_mean, bias_sigma, abs(f_norm - g))
 
 
@@ -346,6 +370,14 @@ def combine(prior: ImuNoise, measured: MeasuredNoise) -> tuple[ImuNoise, list]:
     if measured.still_s >= WHITE_TRUST_S:
         out.arw = measured.arw
         out.vrw = measured.vrw
+        # an installation noisier than the part (vibration, a loose mount) is not steadier
+        # than it either: the in-run bias variation, which a still segment cannot measure,
+        # is raised by the same factor as the white noise it can
+        kg, ka = measured.arw / prior.arw, measured.vrw / prior.vrw
+        if kg > 1.0:
+            out.gyro_bias_instability = prior.gyro_bias_instability * kg
+        if ka > 1.0:
+            out.accel_bias_instability = prior.accel_bias_instability * ka
     else:
         out.arw = max(prior.arw, measured.arw or 0.0)
         out.vrw = max(prior.vrw, measured.vrw or 0.0)
@@ -365,77 +397,67 @@ def combine(prior: ImuNoise, measured: MeasuredNoise) -> tuple[ImuNoise, list]:
 
 
 class NoiseAdapter:
-    """The noise the data shows, online (module docstring, item 3).
+    """The process noise the data shows, online (module docstring, item 3).
 
-    Driven only by trusted fixes, every step bounded:
+    Two witnesses, both fed only with *trusted* fixes (fused in normal mode, no fault
+    episode open), every step bounded, never below the model (``λ ≥ 1``: quiet minutes must
+    not leave the next outage overconfident):
 
-    * ``λ`` (the filter's process-noise scale) rises when the main filter's normalised
-      innovations stay above their dimension (the INS is more uncertain than it says) and
-      decays back to 1 otherwise — never below: a few quiet minutes must not leave the next
-      outage overconfident;
-    * the shadows' σ inflation (their χ² test of fixes) follows the shadows' own
-      dead-reckoning errors over 5–90 s against their σ (:attr:`dr_ratio`), between
-      ``sigma_scale`` and ``shadow_scale_max``: an honestly uncertain shadow must not reject
-      clean fixes.
-
-    (Driving the bias-noise scale ``λ_b`` from the same shadow errors was tried and left
-    out: the shadows' errors lag the scale they were branched with, and the loop wandered to
-    its bounds on simulated drives whose matched noise needed no change.)
+    * the main filter's normalised innovations (:meth:`on_fix`): above their dimension on
+      average, the INS is more uncertain than it says;
+    * the dead-reckoning references of :mod:`selfnav.ins.hypotheses` (:meth:`on_reference`):
+      each trusted fix against each reference is a test of the dead reckoning over its age
+      (10 s … 10 min) — exactly the horizon where the process noise, not the fix noise,
+      decides. The variance ratio κ (actual / predicted) comes from the share of tests beyond
+      the χ²₂ median: for errors κ times the predicted variance,
+      ``P(χ² > 1.386) = ½^(1/κ)``, so ``κ̂ = ln ½ / ln p̂`` — robust: the heavy tails of dead
+      reckoning in turns do not decide. κ̂ scales the references' tests at once
+      (:attr:`reference_ratio`) and pulls ``λ`` towards it for what follows.
 
     Parameters
     ----------
-    hi : largest ``λ``
-    up_step : largest factor one fix may raise ``λ`` by
-    decay : factor per trusted fix back towards 1
-    memory : fixes over which the normalised innovations are averaged (three times as many
-        shadow tests)
-    trigger : mean normalised innovation per dimension above which ``λ`` rises
+    cfg : NoiseAdaptation
     """
 
-    def __init__(self, sigma_scale=2.0, shadow_scale_max=10.0, hi=1e4, up_step=1.1,
-                 decay=0.995, memory=40, trigger=2.0):
-        self.hi, self.up_step, self.decay, self.trigger = hi, up_step, decay, trigger
-        self.alpha = 1.0 / memory
-        self.alpha_dr = 1.0 / (3 * memory)
-        self.base_scale, self.scale_max = sigma_scale, shadow_scale_max
+    def __init__(self, cfg):
+        self.cfg = cfg
+        self.alpha = 1.0 / cfg.memory
         self.fix_ratio = 1.0     # running mean of NIS/dof of trusted fixes
-        self._above = 0.5        # running share of shadow χ² beyond the χ²₂ median
-        self.dr_samples = 0
+        self.ref_ratio = 1.0     # running mean of χ²/dof of trusted fixes against references
+        self._t_ref = None
+        self.ref_samples = 0
         self.updates = 0
-        self.raised = False
 
     @property
-    def dr_ratio(self) -> float:
-        """The shadows' actual/predicted error variance, from the share of fixes beyond the
-        median of χ²₂: for errors κ times the predicted variance, P(χ² > 1.386) = ½^(1/κ), so
-        κ̂ = ln ½ / ln p̂ (robust: the heavy tails of dead reckoning in turns do not decide)."""
-        p = min(max(self._above, 0.02), 0.98)
-        return math.log(0.5) / math.log(p)
-
-    @property
-    def shadow_scale(self) -> float:
-        """σ inflation of the shadows' fix test."""
-        return min(self.base_scale * math.sqrt(max(self.dr_ratio, 1.0)), self.scale_max)
+    def reference_ratio(self) -> float:
+        """κ̂, the young references' actual/predicted error variance (≥ 1)."""
+        return max(self.ref_ratio, 1.0)
 
     def on_fix(self, flt, nis_value, dof):
         """A trusted fix with normalised innovation ``nis_value`` of ``dof`` dimensions."""
-        x = min(nis_value / dof, 25.0)
+        c = self.cfg
+        x = min(nis_value / dof, c.clip)
         self.fix_ratio += self.alpha * (x - self.fix_ratio)
-        if self.fix_ratio > self.trigger:
-            k = min(self.up_step, (self.fix_ratio / self.trigger) ** 0.25)
-        else:
-            k = self.decay
-        new = min(max(flt.q_scale * k, 1.0), self.hi)
+        target = max(1.0, self.fix_ratio / c.trigger if self.fix_ratio > c.trigger else 1.0,
+                     flt.q_scale * self.ref_ratio if self.ref_samples else 1.0)
+        k = min(max(target / flt.q_scale, c.decay), c.up_step)
+        new = min(max(flt.q_scale * k, 1.0), c.hi)
         if new != flt.q_scale:
             flt.q_scale = new
             self.updates += 1
-            self.raised = self.raised or new > 3.0
 
-    def on_shadow(self, chi2_value, dof):
-        """A trusted fix against a mature shadow (its dead-reckoning error over 5–90 s), 2 dof:
-        updates the shadows' variance ratio (:attr:`dr_ratio`)."""
-        self._above += self.alpha_dr * (float(chi2_value > CHI2_2_MEDIAN) - self._above)
-        self.dr_samples += 1
+    def on_reference(self, t, chi2_value, age):
+        """A trusted fix at time ``t`` against a mature reference of ``age`` s (2 dof): the
+        references up to ``reference_age_s`` old feed κ̂ with a memory of
+        ``reference_memory_s`` seconds."""
+        c = self.cfg
+        if age > c.reference_age_s:
+            return
+        dt = 0.0 if self._t_ref is None else max(t - self._t_ref, 0.0)
+        self._t_ref = t
+        a = 1.0 - math.exp(-max(dt, 1e-3) / c.reference_memory_s)
+        self.ref_ratio += a * (min(chi2_value / 2.0, c.clip) - self.ref_ratio)
+        self.ref_samples += 1
 
 
 def calibrated_config(cfg: FilterConfig, imu: ImuData, gnss: GnssData | None = None):

@@ -58,6 +58,8 @@ class ImuNoise:
         rad/s and m/s²; enters as a random walk of density ``2 B² / instability_tau``
     instability_tau : correlation time of that variation, s
     gyro_sf_sigma, accel_sf_sigma : scale-factor σ (fraction), with ``states.scale_factors``
+    gyro_mis_sigma, accel_mis_sigma : axis misalignment / non-orthogonality σ of each
+        off-diagonal element (rad), with ``states.misalignment``
     grade : where the numbers came from (a grade name, "measured", ...)
     adapt : adapt the process-noise scale online from trusted fixes
         (:class:`selfnav.ins.calibrate.NoiseAdapter`)
@@ -74,6 +76,8 @@ class ImuNoise:
     instability_tau: float = 100.0
     gyro_sf_sigma: float = 0.01
     accel_sf_sigma: float = 0.01
+    gyro_mis_sigma: float = 1e-3
+    accel_mis_sigma: float = 1e-3
     grade: str = "industrial"
     adapt: bool = True
 
@@ -97,7 +101,9 @@ class ImuNoise:
                    accel_bias_sigma=max(v(a.bias), bi_a), gyro_bias_instability=bi_g,
                    accel_bias_instability=bi_a, instability_tau=tau,
                    gyro_sf_sigma=max(v(g.scale_factor), 1e-6),
-                   accel_sf_sigma=max(v(a.scale_factor), 1e-6), grade=grade or model.name)
+                   accel_sf_sigma=max(v(a.scale_factor), 1e-6),
+                   gyro_mis_sigma=max(v(g.misalignment), 1e-7),
+                   accel_mis_sigma=max(v(a.misalignment), 1e-7), grade=grade or model.name)
 
     def scaled(self, k: float) -> "ImuNoise":
         """Every noise and bias σ multiplied by ``k`` (the correlation times kept)."""
@@ -116,6 +122,7 @@ class StateOptions:
     Attributes
     ----------
     scale_factors : gyro and accelerometer scale factors (+6)
+    misalignment : gyro and accelerometer axis misalignment, the off-diagonal elements (+12)
     mount_states : the IMU's pitch and yaw relative to the vehicle, seen by the NHC (+2)
     mount_rad : known (initial) mounting pitch and yaw, rad
     mount_sigma : their initial σ, rad
@@ -126,12 +133,23 @@ class StateOptions:
     time_offset : the residual IMU time offset (+1), s, left by the data pre-pass
     time_offset_sigma : its initial σ, s
     time_offset_rw : its random walk, s/√s (clock drift)
+    time_offset_check_s : s between re-estimates of the time offset from the past
+        (:meth:`selfnav.ins.Navigator._check_time_offset`)
+    time_offset_window_s : s of the past each re-estimate uses
+    time_offset_settled_s : no re-estimate once the state's σ is below this, s
+    time_offset_coarse_s : the re-estimate moves the state only beyond this, s (its accuracy)
+    velocity_lag : estimate the lag of the GNSS velocity behind its positions (+1), s, where
+        the fixes carry a velocity
+    velocity_lag_sigma : its initial σ, s (a post-processor's interval velocity: half a
+        fix interval)
+    velocity_lag_rw : its random walk, s/√s
     odometer : the odometer's scale-factor error (+1), with an odometer input
     odometer_scale_sigma : its initial σ (fraction: tyre radius, pressure, wear)
     odometer_scale_rw : its random walk, 1/√s
     """
 
     scale_factors: bool = False
+    misalignment: bool = False
     mount_states: bool = False
     mount_rad: tuple = (0.0, 0.0)
     mount_sigma: float = 2.0 * DEG
@@ -140,8 +158,15 @@ class StateOptions:
     lever_arm_sigma: float = 0.5
     lever_arm_rw: float = 0.0
     time_offset: bool = False
-    time_offset_sigma: float = 0.05
+    time_offset_sigma: float = 0.3
     time_offset_rw: float = 1e-5
+    time_offset_check_s: float = 30.0
+    time_offset_window_s: float = 300.0
+    time_offset_settled_s: float = 0.002
+    time_offset_coarse_s: float = 0.1
+    velocity_lag: bool = True
+    velocity_lag_sigma: float = 0.2
+    velocity_lag_rw: float = 1e-5
     odometer: bool = False
     odometer_scale_sigma: float = 0.02
     odometer_scale_rw: float = 1e-5
@@ -218,6 +243,11 @@ class VehicleConstraints:
     odometer_sigma : m/s, white error of one wheel-speed sample (quantisation, slip)
     odometer_step : s, the shortest interval between odometer updates (faster samples are
         thinned: the speed is smooth, each update costs an epoch)
+    use_magnetometer : a heading update from the magnetometer where the IMU has one
+    max_imu_gap_samples : an IMU step longer than this many sample intervals is a gap the
+        INS does not bridge: the navigator starts again after it
+    mag_step : s between magnetometer heading updates
+    mag_heading_sigma : σ of a magnetometer heading (a car's body field, soft iron), rad
     """
 
     nhc: bool = True
@@ -234,6 +264,10 @@ class VehicleConstraints:
     aid_step: float = 0.2
     odometer_sigma: float = 0.05
     odometer_step: float = 0.2
+    use_magnetometer: bool = True
+    max_imu_gap_samples: float = 6.0
+    mag_step: float = 1.0
+    mag_heading_sigma: float = 5.0 * DEG
 
 
 @dataclass
@@ -312,8 +346,101 @@ class ShadowGuard:
     reacq_run: float = 20.0
 
 
+@dataclass
+class NoiseAdaptation:
+    """The online process-noise scale ``λ`` (:class:`selfnav.ins.calibrate.NoiseAdapter`):
+    policy choices of an estimator.
+
+    Attributes
+    ----------
+    hi : largest ``λ``
+    up_step : largest factor one fix may raise ``λ`` by
+    decay : factor per trusted fix back towards 1
+    memory : trusted fixes over which the main filter's normalised innovations are averaged
+    trigger : mean normalised innovation per dimension above which ``λ`` rises
+    clip : a single test counts for at most this many times its dimension
+    reference_age_s : references up to this age witness the dead reckoning for ``λ``
+    reference_memory_s : s over which their normalised χ² is averaged (κ̂)
+    q_scale0 : ``λ`` at the start
+    vibration : scale the process noise by the vibration the IMU feels, block by block, over
+        the vibration at rest (:func:`selfnav.ins.calibrate.vibration_scale`)
+    vibration_cap : the largest vibration factor
+    """
+
+    hi: float = 1e3
+    up_step: float = 1.05
+    decay: float = 0.99
+    memory: int = 40
+    trigger: float = 2.0
+    clip: float = 25.0
+    reference_age_s: float = 40.0
+    reference_memory_s: float = 60.0
+    q_scale0: float = 1.0
+    vibration: bool = True
+    vibration_cap: float = 100.0
+
+
+@dataclass
+class Integrity:
+    """The fault-hypothesis bank (:mod:`selfnav.ins.hypotheses`): how the navigator decides
+    between the fixes and the inertial solution. Every field is a policy choice.
+
+    Attributes
+    ----------
+    p_false_alarm : probability that a consistent fix (or run) fails a gate; every χ² gate
+        of a single fix is the quantile of this probability
+    false_alarms_per_hour : expected false fault detections (a reset to dead reckoning) per
+        hour of healthy GNSS: the references' gate is the quantile of this rate shared among
+        the tests an hour holds
+    integrity_risk : the risk a protection level stands for (two-sided normal factor)
+    branch_every_s : s between dead-reckoning references while the GNSS is healthy
+    branch_after_s : s of fixes fused without a break before a reference is branched (a
+        filter just back from a long dead reckoning has not settled: its σ is not yet honest)
+    max_age_s : s a reference lives while no episode is open (beyond a few minutes a MEMS
+        dead reckoning's linearised σ stops covering it: on drive_0708 4-minute branches
+        were 350 m off at a 65 m σ)
+    min_age_s : s before a reference judges fixes
+    reference_step_s : s between reference propagation steps (cost; the NHC then weighs as
+        much per second as the filter's updates with their correlated errors)
+    rejections_to_open : consecutive rejected fixes that open an episode
+    run_s : s a run of fixes must span before it may end an episode
+    run_min_fixes : fixes a run needs at least
+    run_max_s : s of the most recent fixes a run keeps
+    innovation_windows : numbers of recent fixes whose whitened innovations must sum to
+        about zero (a drag passes each fix's gate but pulls every one the same way)
+    velocity_span_s : s of a run's last fixes whose own velocity is given to the navigator
+        when the run ends an episode
+    onset_s : s of fixes after an episode opens that characterise the fault (a smooth fault
+        is then extrapolated: the fixes are taken back when they no longer follow it)
+    reinit_after_s : s of fixes that agree with each other and move with the INS but stand
+        outside its envelope before the INS, not the GNSS, is taken as the faulty side
+    outage_s : s without a fix that count as an outage (status dead-reckoning)
+    separation_floor_m : smallest σ of a separation between two solutions (numerics), m
+    """
+
+    p_false_alarm: float = 1e-4
+    false_alarms_per_hour: float = 0.1
+    integrity_risk: float = 1e-5
+    branch_every_s: float = 10.0
+    branch_after_s: float = 10.0
+    max_age_s: float = 160.0
+    min_age_s: float = 2.0
+    reference_step_s: float = 1.0
+    rejections_to_open: int = 2
+    run_s: float = 5.0
+    run_min_fixes: int = 5
+    run_max_s: float = 30.0
+    onset_s: float = 3.0
+    innovation_windows: tuple = (4, 8, 16, 32)
+    velocity_span_s: float = 2.0
+    reinit_after_s: float = 20.0
+    outage_s: float = 2.0
+    separation_floor_m: float = 0.05
+
+
 GROUPS = {"imu": ImuNoise, "states": StateOptions, "init": Initialisation, "gnss": GnssAiding,
-          "vehicle": VehicleConstraints, "outliers": OutlierDefence, "shadows": ShadowGuard}
+          "vehicle": VehicleConstraints, "outliers": OutlierDefence, "shadows": ShadowGuard, "integrity": Integrity,
+          "adaptation": NoiseAdaptation}
 
 
 def _field_index():
@@ -334,8 +461,8 @@ _FIELD_GROUP = _field_index()
 GRADE_FILTER_SETTINGS = {
     "navigation": {},
     "tactical": {},
-    "industrial": {},
-    "consumer": {"scale_factors": True, "nhc_sigma": 0.5},
+    "industrial": {"scale_factors": True, "misalignment": True},
+    "consumer": {"scale_factors": True, "misalignment": True, "nhc_sigma": 0.5},
 }
 
 
@@ -353,6 +480,8 @@ class FilterConfig:
     vehicle: VehicleConstraints = field(default_factory=VehicleConstraints)
     outliers: OutlierDefence = field(default_factory=OutlierDefence)
     shadows: ShadowGuard = field(default_factory=ShadowGuard)
+    integrity: Integrity = field(default_factory=Integrity)
+    adaptation: NoiseAdaptation = field(default_factory=NoiseAdaptation)
     cov_step: float = 0.2          # covariance propagation sub-step, s
     vertical: str = "free"         # vertical channel of the mechanization
 
@@ -383,3 +512,29 @@ class FilterConfig:
             raise SelfnavError(f"unknown grade '{grade}' (use {', '.join(sensors.GRADE_NAMES)})")
         base = cls(imu=ImuNoise.from_model(sensors.GRADES[key], key))
         return base.updated(**{**GRADE_FILTER_SETTINGS[key], **fields})
+
+
+def navigator_config(grade: str = "auto", *, lever_arm_m=None, nhc_lever_m=None,
+                     nhc: bool = True, imu_time_offset_s: float | None = None,
+                     odometer: bool = False, **fields) -> FilterConfig:
+    """The configuration :class:`selfnav.ins.Navigator` (and ``selfnav navigate``) starts from.
+
+    ``grade="auto"`` is the consumer preset as the prior (the widest), to be raised to what
+    the data shows; ``lever_arm_m`` (IMU → antenna, body RFU, m) not given: estimated (3
+    states); ``imu_time_offset_s`` not given: estimated (a state with the prior σ
+    ``time_offset_sigma``); ``nhc_lever_m``: IMU → the point where the non-holonomic
+    constraint holds (rear axle); ``fields`` override any field by name.
+    """
+    opts = dict(nhc=nhc, odometer=odometer)
+    if lever_arm_m is not None:
+        opts["lever_arm_b"] = np.asarray(lever_arm_m, dtype=float)
+    else:
+        opts["lever_arm"] = True
+    if nhc_lever_m is not None:
+        opts["nhc_lever_b"] = np.asarray(nhc_lever_m, dtype=float)
+    opts["time_offset"] = imu_time_offset_s is None
+    auto = str(grade).lower().strip() == "auto"
+    cfg = FilterConfig.for_grade("consumer" if auto else grade, **opts, **fields)
+    if auto:
+        cfg.imu.grade = "auto (consumer prior)"
+    return cfg

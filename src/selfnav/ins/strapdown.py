@@ -206,7 +206,7 @@ def _mechanize(dth, dvb, dts, defl, anom, href, s, p, prm, out_pos, out_vel, out
 # Python API
 # --------------------------------------------------------------------------------------------
 @dataclass
-class NavState:
+class InsState:
     """Navigation state at one instant (rad, m, m/s; ``C_nb`` nav ENU -> body RFU)."""
 
     t: float
@@ -344,8 +344,8 @@ class Strapdown:
         return self._s[6:15].reshape(3, 3).T.copy()
 
     @property
-    def state(self) -> NavState:
-        return NavState(self.t, self.lat, self.lon, self.h, self.velocity_n, self.C_nb)
+    def state(self) -> InsState:
+        return InsState(self.t, self.lat, self.lon, self.h, self.velocity_n, self.C_nb)
 
     # ---- integration
     def _run(self, dtheta, dv, dt, h_ref, deflection, anomaly):
@@ -361,10 +361,10 @@ class Strapdown:
                    self._s, self._p, self._prm, pos, vel, C)
         return pos, vel, C
 
-    def update(self, dtheta, dv, dt, *, h_ref=None, deflection=None, anomaly=None) -> NavState:
+    def update(self, dtheta, dv, dt, *, h_ref=None, deflection=None, anomaly=None) -> InsState:
         """Advance by one interval of body increments ``Δθ`` (rad) and ``Δv`` (m/s) over ``dt`` s.
 
-        Returns the new :class:`NavState`; ``h_ref``, ``deflection``, ``anomaly`` override the
+        Returns the new :class:`InsState`; ``h_ref``, ``deflection``, ``anomaly`` override the
         constructor's values for this step.
         """
         dth = np.asarray(dtheta, dtype=float).reshape(1, 3)
@@ -378,10 +378,11 @@ class Strapdown:
         self.t += dt
         return self.state
 
-    def advance(self, t, dt, dtheta, dv):
+    def advance(self, t, dt, dtheta, dv, *, states: bool = False):
         """The filter's fast path of :meth:`run`: advance over intervals of lengths ``dt``
         ending at times ``t`` (C-contiguous float64 arrays, checked by the caller) with the
-        constructor's gravity options; returns the last attitude ``C_nb``."""
+        constructor's gravity options; returns the last attitude ``C_nb``, or with
+        ``states`` every new state ``(pos (N, 3), vel (N, 3), C_nb (N, 3, 3))``."""
         n = dtheta.shape[0]
         pos = np.empty((n, 3))
         vel = np.empty((n, 3))
@@ -393,7 +394,7 @@ class Strapdown:
         defl, anom, href = self._fixed
         _mechanize(dtheta, dv, dt, defl, anom, href, self._s, self._p, self._prm, pos, vel, C)
         self.t = float(t[-1])
-        return C[-1]
+        return (pos, vel, C) if states else C[-1]
 
     def run(self, t, dtheta, dv, *, h_ref=None, deflection=None, anomaly=None) -> Trajectory:
         """Advance over a batch of intervals ending at times ``t`` (N,); returns the N new states.

@@ -10,15 +10,17 @@ from __future__ import annotations
 
 import numpy as np
 
+from selfnav.errors import SelfnavError
 from selfnav.ins.align import robust_init
-from selfnav.ins.config import CHI2_2_999, CHI2_2_9999
+from selfnav.ins.config import CHI2_2_999, chi2_999
+from selfnav.ins.measurements import LevelRoad, RoadLine
 from selfnav.roads.corners import corner_candidates, line_intersection
 from selfnav.roads.graph import RoadGraph
 from selfnav.roads.particles import TWO_PI, MatcherConfig, RoadParticles, wrap
 
 
 def start_on_roads(imu, gnss, graph: RoadGraph, cfg=None, *, span=30.0, far_sigmas=2.0,
-                   max_far=0.15, sigma=10.0):
+                   max_far=0.15, sigma=10.0, complete: bool = False):
     """The navigator's start (:func:`selfnav.ins.align.robust_init`) checked against the map.
 
     ``robust_init`` waits for a run of fixes that look healthy by themselves; a receiver that
@@ -30,6 +32,9 @@ def start_on_roads(imu, gnss, graph: RoadGraph, cfg=None, *, span=30.0, far_sigm
     ``max_far`` of them farther than ``far_sigmas`` fix σ from every such road (a nominal fix:
     about 5 %). If not, the start is tried again after that span (up to 20 times); with no
     start that passes, the first one is kept.
+
+    ``complete`` (the causal navigator's start-up): only a start whose whole span lies in the
+    data and that follows a healthy run of fixes counts; None until there is one.
     """
     sig = np.asarray(gnss.sigma_m, float) if gnss.sigma_m is not None else \
         np.full(len(gnss.t), np.nan)
@@ -42,14 +47,23 @@ def start_on_roads(imu, gnss, graph: RoadGraph, cfg=None, *, span=30.0, far_sigm
         sub = gnss.select(gnss.t >= t_from)
         if len(sub) < 25:
             break
-        init = robust_init(imu, sub, cfg=cfg)
+        try:
+            init = robust_init(imu, sub, cfg=cfg, require_healthy=complete)
+        except SelfnavError:
+            if complete:
+                return None
+            raise
         first = first or init
         t0 = float(init["t"])
+        if complete and gnss.t[-1] < t0 + span:
+            return None
         idx = np.flatnonzero((gnss.t >= t0 - 10.0) & (gnss.t <= t0 + span))
         if len(idx) < 5 or np.mean(_off_roads(graph, gnss.t, xy, idx, far_sigmas * sig)) \
                 <= max_far:
             return init
         t_from = t0 + span
+    if complete:
+        return None
     return first if first is not None else robust_init(imu, gnss, cfg=cfg)
 
 
@@ -119,11 +133,7 @@ class EkfRoadAid:
     bend_zone : distance from a bend's vertex within which the corner logic applies, m
     grade_sigma : σ of the road grade (level-road prior; None: off)
     seed : random stream
-    veto_window : s of fixes the map's GNSS check (:meth:`fix_veto`) judges
-    veto_min_m : the smallest mean offset across the road it objects to, m
     lock_m : the filter is on the road when its last constraint found it within this, m
-    max_veto : s after which the check stops objecting (an outlier episode is shorter)
-    release_s : s the fixes must sit still against the filter, on a road, to end an objection
     sigma_corner : σ of a corner fix along and across the road, m (:meth:`_corner_fix`)
     q_along : (m/s)²/s, along-track speed variance added while the cloud judges GNSS
         unhealthy (:meth:`_widen_along`; None: off)
@@ -133,18 +143,14 @@ class EkfRoadAid:
         than 20 s off the route against 8)
     """
 
-    def __init__(self, graph: RoadGraph, gnss, cfg: MatcherConfig | None = None, *,
+    def __init__(self, graph: RoadGraph, cfg: MatcherConfig | None = None, *,
                  sigma_cross=1.0, sigma_arc=1.0, sigma_heading=np.radians(5.0), interval=1.0,
                  agree_m=10.0, arc_agree_m=4.0, bend_zone=25.0, grade_sigma=0.08, seed=0,
-                 veto_window=10.0, veto_min_m=12.0, lock_m=5.0, max_veto=330.0, release_s=20.0,
+                 lock_m=5.0,
                  sigma_corner=2.5, q_along=0.01, curve_sigma=None):
         self.g = graph
         self.pf = RoadParticles(graph, cfg, seed)
-        x, y = graph.to_local(gnss.lat, gnss.lon)
-        self.fix_t = np.asarray(gnss.t, float)
-        self.fix_xy = np.column_stack([x, y])
-        self.sig = (np.asarray(gnss.sigma_m, float) if gnss.sigma_m is not None
-                    else np.full(len(gnss.t), self.pf.cfg.sigma_gnss))
+        self.fix_t, self.fix_xy, self.sig = [], [], []     # the fixes as they arrive
         self.k = 0
         self.t_last = None
         self.sigma_cross = sigma_cross
@@ -164,7 +170,7 @@ class EkfRoadAid:
         self.seg_cur = -1
         self.history = []      # (t, x, y, seg, spread, line share)
         self.corner = self._corner_nodes()
-        self.counts = {"line": 0, "leg": 0, "arc": 0, "curve": 0, "grade": 0, "veto": 0,
+        self.counts = {"line": 0, "leg": 0, "arc": 0, "curve": 0, "grade": 0,
                        "corner": 0}
         self.curve_sigma = curve_sigma
         self.sigma_corner = sigma_corner
@@ -172,16 +178,42 @@ class EkfRoadAid:
         self.track = []            # (t, heading, position) of the filter, recent seconds
         self.turn = None           # the turn being driven: {"t0", "t_calm"}
         self.corner_log = []       # (t, correction E, N) of each corner fix
-        self.veto_window = veto_window
-        self.veto_min_m = veto_min_m
         self.lock_m = lock_m
         self.lock = None           # (t, normal) of the last constraint that found the filter on it
-        self.across = []           # (t, fix − filter across the road, along it, heading)
-        self.vetoing = False
-        self.vetoed = set()        # times of the fixes objected to
-        self.t_veto = -np.inf
-        self.max_veto = max_veto
-        self.release_s = release_s
+
+    # ------------------------------------------------------------------ the stream
+    def add_fix(self, t, lat, lon, sigma):
+        """A GNSS fix as it arrives (rad, σ per axis m): the cloud takes it when the filter's
+        epochs reach its time."""
+        x, y = self.g.to_local(lat, lon)
+        self.fix_t.append(float(t))
+        self.fix_xy.append((float(x), float(y)))
+        self.sig.append(float(sigma) if np.isfinite(sigma) else self.pf.cfg.sigma_gnss)
+
+    def start_check(self, imu, gnss, cfg):
+        """The navigator's start, checked against the map (:func:`start_on_roads`, on the
+        data so far: None until the check's span is complete)."""
+        return start_on_roads(imu, gnss, self.g, cfg, complete=True)
+
+    def on_start(self, t0, flt):
+        """The navigator started at ``t0``."""
+
+    def __call__(self, t, flt):
+        """The map's constraints at an aiding epoch, applied to ``flt`` (gated, χ² 0.999 as
+        each says); returns the error-state correction (zeros when nothing applied)."""
+        meas = self._constraint(t, flt)
+        dx = np.zeros(flt.nx)
+        for m in meas:
+            if isinstance(m, dict):
+                gate = m.pop("gate", True)
+                m = RoadLine(**m)
+            else:
+                gate = True
+            mod = m.model(flt)
+            if gate and flt.nis(mod) > chi2_999(len(mod.r)):
+                continue
+            dx = dx + flt.update(mod)
+        return dx
 
     def _corner_nodes(self):
         """Per segment: does it end (start) in a bend of more than 20° on some way on?"""
@@ -276,18 +308,17 @@ class EkfRoadAid:
             return 0.0
         return float(wrap(hdg - self.hdg_last)) / max(dt, 1e-3)
 
-    def _grade_prior(self, t, flt, v):
+    def _grade_prior(self, t, flt, v, out):
         """Level-road prior on the vertical velocity (class docstring)."""
         if self.grade_sigma is None or t - self.t_grade < self.interval - 1e-9:
             return
         self.t_grade = t
-        H = np.zeros((1, flt.nx))
-        H[0, 5] = 1.0
-        s_v = self.grade_sigma * float(np.hypot(v[0], v[1])) + 0.1
-        flt.kalman(np.array([float(v[2])]), H, np.array([[s_v * s_v]]))
+        out.append(LevelRoad(self.grade_sigma * float(np.hypot(v[0], v[1])) + 0.1))
         self.counts["grade"] += 1
 
-    def __call__(self, t, flt):
+    def _constraint(self, t, flt):
+        """The measurements of this epoch (a list: the level road, a road line or corner)."""
+        meas = []
         ins, pf = flt.ins, self.pf
         x, y = self.g.to_local(ins.lat, ins.lon)
         p_ins = np.array([float(x), float(y)])
@@ -298,7 +329,7 @@ class EkfRoadAid:
             self.t_last = t
             # the fixes before the start are behind it (taken at once they dragged the cloud
             # 1 km off, seen); the start follows a run of healthy fixes (robust_init)
-            self.k = int(np.searchsorted(self.fix_t, t - 1.0, side="right"))
+            self.k = int(np.searchsorted(np.asarray(self.fix_t), t - 1.0, side="right"))
             pf.reset_health(healthy_history=True)
         v = ins.velocity_n
         dt = t - self.t_last
@@ -317,18 +348,12 @@ class EkfRoadAid:
         self._widen_along(flt, hdg, dt)
         pf.predict(speed * dt, hdg, dt)
         while self.k < len(self.fix_t) and self.fix_t[self.k] <= t:
-            if float(self.fix_t[self.k]) in self.vetoed:
-                # a fix the map objects to is no fix for the cloud either (a drift would
-                # otherwise pull it along the roads, re-seed it on them); its health test
-                # starts again after the objection
-                pf.reset_health()
-            else:
-                pf.update_gnss(self.fix_xy[self.k], self.sig[self.k])
+            pf.update_gnss(np.asarray(self.fix_xy[self.k]), self.sig[self.k])
             self.k += 1
         est = pf.estimate()
         if est["seg"] != self.seg_cur:
             self.seg_prev, self.seg_cur = self.seg_cur, est["seg"]
-        self._grade_prior(t, flt, v)
+        self._grade_prior(t, flt, v, meas)
         w, pos = pf.weights(), pf.positions()
         share = self._line_weight([est["seg"]], w, pos)
         legs = self._legs(est, int(np.sign(w_rate)) if turning else 0)
@@ -339,12 +364,11 @@ class EkfRoadAid:
             self.t_constraint = t
             if np.hypot(*(est["xy"] - corner.pop("target"))) > 15.0:
                 pf.seed(p_ins - corner["e"], 10.0, heading=hdg)
-            if np.hypot(*corner.pop("e")) > 10.0:
-                self.across = []       # offsets from where the filter was
-            return corner
+            corner.pop("e")
+            return meas + [corner]
         # the cloud's error is correlated over seconds: one constraint per ``interval``
         if share < 0.8 or t - self.t_constraint < self.interval - 1e-9:
-            return None
+            return meas
         out = None
         P2 = flt.P[0:2, 0:2]
         if legs is None and not turning:
@@ -374,12 +398,12 @@ class EkfRoadAid:
                     if abs(arc[1]) < max(self.arc_agree_m, 2.0 * sig_a):
                         out = {"normal_n": arc[0], "offset": arc[1], "kind": "arc"}
         if out is None:
-            return None
+            return meas
         # the cloud and the filter disagree by more than the filter's own uncertainty allows:
         # one of them is on another road; constraining the filter then would make it two
         n = out["normal_n"]
         if abs(out["offset"]) > max(self.agree_m, 3.0 * float(np.sqrt(max(n @ P2 @ n, 0.0)))):
-            return None
+            return meas
         self.t_constraint = t
         if abs(out["offset"]) < self.lock_m:
             # the normal to the right of travel (an arc's points to the centre)
@@ -391,16 +415,16 @@ class EkfRoadAid:
         self.counts[kind] += 1
         if kind == "arc":
             out["sigma"] = self.sigma_arc
-            return out
+            return meas + [out]
         if kind == "curve":
             out["sigma"] = self.curve_sigma
-            return out
+            return meas + [out]
         out["sigma"] = self.sigma_cross
         if self.sigma_heading is None:
             del out["heading"]
         else:
             out["sigma_heading"] = self.sigma_heading
-        return out
+        return meas + [out]
 
     def _widen_along(self, flt, hdg, dt):
         """Along-track speed variance ``q_along·dt`` while GNSS is unhealthy (the cloud's test).
@@ -479,104 +503,3 @@ class EkfRoadAid:
         return {"normal_n": n, "offset": float(e @ n), "sigma": self.sigma_corner,
                 "along_n": u, "along_offset": float(e @ u), "sigma_along": self.sigma_corner,
                 "gate": False, "e": e, "target": p_ins - e}
-
-    # ------------------------------------------------------------ GNSS check from the map
-    def fix_veto(self, t, lat, lon, sigma, flt) -> str | None:
-        """Does the map object to the GNSS fix at ``t`` (rad, rad, σ per axis m)? Returns the
-        reason, or None.
-
-        A smoothly drifting receiver (or a spoofer) is self-consistent: its fixes pass every
-        test of their own and, once the drift is slow enough, the filter's window test too;
-        after a while the navigator even concludes that the INS is lost and re-initialises
-        from them. The map is a witness the drift cannot fool. The offsets ``d`` of the fixes
-        from the filter (ENU, m) over the last ``veto_window`` s are fitted with a line (a
-        drift moves them). While the filter is *on the road* (its last road constraint, within
-        5 s, found it within ``lock_m``) the check starts objecting when the fixes are
-        consistent among themselves (robust spread about the line below 2.5 σ per axis: not
-        white 200 m outliers, which the filter's own gates handle) and the line now sits
-
-        * more than ``max(veto_min_m, 3σ/√n)`` across the filter's heading (the map's
-          evidence: the vehicle is on this road) — unless another road of the same
-          direction runs where the fixes are (the filter may be on the wrong one of two
-          parallel roads: the fixes decide), or
-        * farther than ``veto_min_m`` and outside the filter's own uncertainty (χ² 2 dof,
-          0.9999, of ``P + σ²/n``: an odometer keeps it small along the road).
-
-        Once objecting it goes on — the filter dead-reckons along the road, constrained by it,
-        whether or not the cloud gives a constraint at that moment, and a drift that crosses
-        another road or turns along it does not end it — until the fixes come back (the line
-        within ``veto_min_m / 2``), scatter like white outliers, or sit still against the
-        filter for ``release_s`` (slope below ``0.3 m/s + 2σ``) on a road of the filter's
-        direction (then the filter, not the fixes, is off: they decide), or ``max_veto`` s
-        pass. (A drift moves at σ/τ, 3.3 m/s for 200 m and 60 s; over 20 s it sat still on a
-        road of a grid now and then: Helsinki, seen; 60 s fixed that drive but failed
-        the 300 s outlier-window test, 4.96 m along against 4.5, so the default stays 20 s.)
-        """
-        ins = flt.ins
-        x, y = self.g.to_local(ins.lat, ins.lon)
-        zx, zy = self.g.to_local(lat, lon)
-        d = np.array([float(zx) - float(x), float(zy) - float(y)])
-        self.across = [a for a in self.across if a[0] > t - self.release_s] + [(t, d)]
-        locked = self.lock is not None and t - self.lock[0] <= 5.0
-        if not (self.vetoing or locked):
-            return None
-        recent = [a for a in self.across if a[0] > t - self.veto_window]
-        if len(recent) < 5:
-            return None
-        tt = np.array([a[0] for a in recent]) - t
-        D = np.array([a[1] for a in recent])
-        A = np.column_stack([np.ones(len(tt)), tt])
-        coef = np.linalg.lstsq(A, D, rcond=None)[0]
-        now = coef[0]
-        res = D - A @ coef
-        spread = 1.4826 * np.median(np.abs(res - np.median(res, axis=0)), axis=0)
-        hdg = _heading_of(ins.C_nb)
-        n_r = np.array([np.cos(hdg), -np.sin(hdg)])                  # right of the heading
-        across = float(now @ n_r)
-        dist = float(np.hypot(*now))
-        lim = max(self.veto_min_m, 3.0 * sigma / np.sqrt(len(D)))
-        white = bool(np.any(spread > 2.5 * sigma))
-        if self.vetoing:
-            if (white or dist < 0.5 * self.veto_min_m or t - self.t_veto > self.max_veto
-                    or self._still_on_a_road(t, np.array([float(x), float(y)]), hdg, sigma)):
-                self.vetoing = False
-                return None
-        else:
-            if white or dist < self.veto_min_m:
-                return None
-            S = flt.P[0:2, 0:2] + np.eye(2) * sigma**2 / len(D)
-            ins_says = float(now @ np.linalg.solve(S, now)) > CHI2_2_9999
-            map_says = abs(across) > lim and not self._road_at(
-                np.array([float(x), float(y)]) + now, hdg, 3.0 * sigma / np.sqrt(len(D)) + 3.0)
-            if not (ins_says or map_says):
-                return None
-            self.t_veto = t
-            self.vetoing = True
-        self.counts["veto"] += 1
-        self.vetoed.add(float(t))
-        return (f"off the road the map holds ({dist:.0f} m from the filter, {across:+.0f} m "
-                f"across, {len(D)} fixes)")
-
-    def _road_at(self, q, hdg, radius):
-        """Is there a road heading within 30° of ``hdg`` within ``radius`` of ``q``?"""
-        import shapely
-
-        near = np.asarray(self.g.tree.query(shapely.points(q), predicate="dwithin",
-                                            distance=float(radius)), np.int64)
-        return bool(len(near) and np.any(np.abs(wrap(self.g.seg_heading[near] - hdg))
-                                         < np.radians(30.0)))
-
-    def _still_on_a_road(self, t, p, hdg, sigma):
-        """Have the fixes sat still against the filter for ``release_s``, on a road of its
-        direction?"""
-        D = [a for a in self.across if a[0] > t - self.release_s]
-        if len(D) < 0.75 * self.release_s or t - D[0][0] < 0.9 * self.release_s:
-            return False
-        tt = np.array([a[0] for a in D]) - t
-        X = np.array([a[1] for a in D])
-        A = np.column_stack([np.ones(len(tt)), tt])
-        coef = np.linalg.lstsq(A, X, rcond=None)[0]
-        s_slope = sigma / np.sqrt(np.sum((tt - tt.mean()) ** 2))
-        if np.hypot(*coef[1]) > 0.3 + 2.0 * s_slope:
-            return False
-        return self._road_at(p + coef[0], hdg, 3.0 * sigma / np.sqrt(len(D)) + 3.0)

@@ -1,0 +1,573 @@
+"""Never worse than having no GNSS: the two-sided fault-hypothesis bank (DESIGN §7, §10).
+
+The navigator's filter ``M`` fuses the fixes it accepts. Beside it the bank keeps
+**references**: copies of ``M`` branched every ``branch_every_s`` while the GNSS is healthy,
+then carried by the IMU and the vehicle constraints only (NHC, ZUPT, wheel speed) — the
+hypotheses "the fixes are faulty since ``t_b``". Their covariance grows with their age as the
+dead reckoning's error does (honest σ: :mod:`selfnav.ins.ekf` models the sensor errors the
+grade has), so each is an envelope the truth lies in. They are kept at ages spread over
+octaves (10–20 s, 20–40 s, … up to ``max_age_s``): a young one sees a fast drag early, an
+old one a slow drag. Each fix is judged, at a false-alarm probability the configuration
+states (:class:`selfnav.ins.config.Integrity`):
+
+* against ``M``: ``NIS = rᵀ (H P_M Hᵀ + R)⁻¹ r`` (2 dof, horizontal) below the gate;
+* against every reference ``b`` (the envelope): a fix outside one is never accepted;
+* by **solution separation** (ARAIM-style, in time): had ``M`` taken the fix, its
+  horizontal position ``x_M⁺`` would differ from the reference's by ``d``, whose covariance
+  under "the fixes are healthy" is ``P_b − P_M⁺`` (the reference is ``M`` less the fixes since
+  ``t_b``); ``dᵀ (P_b − P_M⁺)⁻¹ d`` above the gate is a fault since ``t_b``. A drag that
+  each fix hides from ``M`` (every test of a fix against a state the fixes just moved passes)
+  accumulates here.
+
+A fault detected since ``t_b`` resets ``M`` to the youngest reference that detects it (the
+references younger than it are contaminated and dropped) and opens an **episode**; fixes
+rejected one after another open one too (``M`` itself never took them). While an episode is
+open ``M`` dead-reckons, and a fix within its gate joins a **run**; the run is taken back when
+it is at least ``run_s`` long and moves with the INS: the offsets of its fixes from ``M`` fit a
+line whose residuals are the fixes' noise (white outliers and a Gauss–Markov error fail) and
+whose slope is within what ``M``'s velocity σ allows (a drag faster than the dead reckoning
+can drift fails). A run that keeps failing only the slope while it is self-consistent, with
+no reference left to say the fixes are the faulty side, is the other hypothesis — the INS is
+lost — after ``reinit_after_s``: ``M`` is restarted from the run (the GNSS branch).
+Rejections never widen ``P`` (a defence that inflates P relaxes its own gate).
+
+Outputs: every decision (:class:`selfnav.ins.policy.FixDecision`), the episodes (start, end,
+kind: outage / outliers / drag / ins-fault, largest separation) and per row a horizontal
+protection level at the configured integrity risk (:meth:`FaultBank.protection_level`).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from selfnav.earth import enu_offset
+from selfnav.ins.measurements import NonHolonomic, ZeroVelocity
+from selfnav.ins.policy import FixStatus, chi2_gate, normal_quantile
+
+
+@dataclass
+class Reference:
+    """A dead-reckoning branch: the hypothesis "the fixes are faulty since ``t0``"."""
+
+    t0: float
+    flt: object
+
+
+@dataclass
+class Episode:
+    """A stretch where the fixes and the inertial solution disagree (or there are none)."""
+
+    t_start: float
+    t_end: float | None = None
+    kind: str = "outliers"
+    reset: bool = False            # M was reset to a reference when it opened
+    max_separation_m: float = 0.0
+    fixes: int = 0
+    rejected: int = 0
+    consistent_runs: int = 0
+    onset: list = field(default_factory=list)   # the first fixes' offsets from M (_RunFix)
+    fault: dict | None = None                   # the fault's model from them (smooth faults)
+    origin: tuple | None = None                 # (lat, lon) of the first fix of the episode
+    characterised: bool = False
+
+    def to_dict(self) -> dict:
+        return {"start_s": self.t_start, "end_s": self.t_end, "kind": self.kind,
+                "largest_separation_m": self.max_separation_m, "fixes": self.fixes,
+                "rejected": self.rejected}
+
+
+@dataclass
+class _RunFix:
+    t: float
+    offset: np.ndarray     # fix − M's prediction, ENU horizontal, m
+    sigma: float
+    p: np.ndarray | None = None   # the fix, ENU horizontal from the episode's origin, m
+
+
+@dataclass
+class Verdict:
+    """What the bank decided for one fix."""
+
+    status: FixStatus
+    reason: str
+    nis: float
+    apply: bool = False                 # update M with the fix
+    reset_to: object = None             # a reference to reset M to (a filter)
+    excluded_since: float | None = None  # fused fixes after this time are now excluded
+    widen: np.ndarray | None = None      # open M's position σ to this offset first (INS fault)
+    run_velocity: tuple | None = None    # (velocity ENU, cov) the run of fixes shows
+    add_R: np.ndarray | None = None      # 2×2 added to the fix's horizontal noise
+    vehicle: dict = field(default_factory=dict)
+
+
+class FaultBank:
+    """References, episodes and the fix decisions (module docstring).
+
+    Parameters
+    ----------
+    cfg : FilterConfig
+        Uses ``cfg.integrity`` (gates, ages, run length) and ``cfg.vehicle`` (the constraints
+        the references keep).
+    """
+
+    def __init__(self, cfg, adapter=None):
+        self.cfg = cfg
+        self.adapter = adapter
+        ig = cfg.integrity
+        self.gate = chi2_gate(2, ig.p_false_alarm)
+        self.fix_dt = 1.0               # the fixes' interval (the navigator keeps it current)
+        self.diag = None                # a list to collect (t, age, q_fix, q_sep, sep, κ) in
+        self.k_pl = normal_quantile(ig.integrity_risk)
+        self.refs: list[Reference] = []
+        self.episode: Episode | None = None
+        self.outage: Episode | None = None
+        self.episodes: list[Episode] = []
+        self.run: list[_RunFix] = []
+        self.streak = 0                 # consecutive rejected fixes (normal mode)
+        self.used_streak = 0            # consecutive fused fixes (normal mode)
+        self.t_healthy = None           # since when the fixes have been fused without a break
+        self.innov = []                 # whitened innovations of the recent fixes (normal mode)
+        self._buf = []                  # IMU blocks since the last reference step
+        self._t_step = -np.inf
+        self._t_branch = -np.inf
+        self.alarms = 0
+        self.reinits = 0
+        self.recoveries = 0
+        self._sep_max = 0.0
+
+    # ------------------------------------------------------------------ references
+    def on_imu(self, t, dtheta, dv, dt, still):
+        """IMU increments that moved ``M`` (stamps ``t``): the references follow once per
+        ``reference_step_s``."""
+        if not self.refs:
+            return
+        self._buf.append((t, dtheta, dv, dt, still))
+        if t[-1] - self._t_step >= self.cfg.integrity.reference_step_s - 1e-9:
+            self.flush()
+
+    def flush(self):
+        """Bring every reference to the last IMU sample."""
+        if not self._buf:
+            return
+        t = np.concatenate([b[0] for b in self._buf])
+        dth = np.concatenate([b[1] for b in self._buf])
+        dv = np.concatenate([b[2] for b in self._buf])
+        dt = np.concatenate([b[3] for b in self._buf])
+        still = all(b[4] for b in self._buf)
+        self._buf = []
+        self._t_step = float(t[-1])
+        veh = self.cfg.vehicle
+        for ref in self.refs:
+            f = ref.flt
+            k = t > f.ins.t + 1e-12
+            if not k.any():
+                continue
+            sth, sdv, _ = f.mechanize(t[k], dth[k], dv[k], dt[k])
+            f.propagate(float(dt[k].sum()), sth, sdv)
+            if still and veh.zupt:
+                f.update(ZeroVelocity(veh.zupt_sigma).model(f))
+            elif veh.nhc:
+                f.update(NonHolonomic(veh.nhc_sigma, veh.nhc_sigma_up or veh.nhc_sigma).model(f))
+
+    def maintain(self, t, flt):
+        """Branch a new reference from ``M`` every ``branch_every_s`` while the GNSS is healthy;
+        keep the oldest reference of each age octave, none older than ``max_age_s``."""
+        ig = self.cfg.integrity
+        if self.episode is None and self.t_healthy is not None \
+                and t - self.t_healthy >= ig.branch_after_s - 1e-9 \
+                and t - self._t_branch >= ig.branch_every_s - 1e-9:
+            self.flush()
+            self.refs.append(Reference(t, flt.copy()))
+            self._t_branch = t
+        self._prune(t)
+
+    def _prune(self, t):
+        ig = self.cfg.integrity
+        keep, octaves = [], set()
+        for ref in self.refs:                       # oldest first
+            age = t - ref.t0
+            if age > ig.max_age_s:
+                continue
+            o = int(np.floor(np.log2(max(age, 1e-3) / ig.branch_every_s))) if age >= \
+                ig.branch_every_s else -1
+            if o >= 0 and o in octaves:
+                continue
+            octaves.add(o)
+            keep.append(ref)
+        self.refs = keep
+
+    def mature(self, t):
+        """References old enough to judge fixes (at least one reference step old)."""
+        return [r for r in self.refs if t - r.t0 >= self.cfg.integrity.min_age_s]
+
+    # ------------------------------------------------------------------ the decision
+    def judge(self, flt, m_pos, t, latlon=None) -> Verdict:
+        """The decision for a position fix (a linearised :class:`~selfnav.ins.measurements.Model`
+        ``m_pos`` of the horizontal rows; ``latlon`` its position, rad) against ``M`` = ``flt``
+        and the references."""
+        self._latlon = latlon
+        P = flt.P
+        self._end_outage(t)
+        S = m_pos.H @ P @ m_pos.H.T + m_pos.R
+        nis = float(m_pos.r @ np.linalg.solve(S, m_pos.r))
+        if self.episode is not None:
+            return self._judge_episode(flt, m_pos, t, nis)
+        if nis > self.gate:
+            self.streak += 1
+            self.used_streak = 0
+            if self.streak >= self.cfg.integrity.rejections_to_open:
+                self._open(t - 0.0, reset=False)
+            return Verdict(FixStatus.REJECTED, f"χ² gate (NIS {nis:.3g})", nis)
+        # a drag hides from each single test, not from their sum: the whitened innovations of
+        # the recent fixes must average to zero (a sequential test over 4 … 32 fixes)
+        wv = np.linalg.solve(np.linalg.cholesky(S), m_pos.r)
+        self.innov.append(wv)
+        self.innov = self.innov[-self.cfg.integrity.innovation_windows[-1]:]
+        drift = self._innovation_drift()
+        if drift is not None:
+            self._open(t, reset=False)
+            self.episode.kind = "drag"
+            return Verdict(FixStatus.REJECTED, drift, nis)
+        self.flush()
+        # the envelope: a fix outside a reference's is not accepted; and the separation M
+        # would have from each reference after taking it
+        K = np.linalg.solve(S, m_pos.H @ P).T
+        dx = K @ m_pos.r
+        P_plus_hh = (P - K @ S @ K.T)[:2, :2]
+        alarms, tested = [], []
+        mature = self.mature(t)
+        gate = self.reference_gate(len(mature))
+        kappa = 1.0 if self.adapter is None else self.adapter.reference_ratio
+        for ref in mature:
+            q_fix, q_sep, sep = self._against(ref, flt, m_pos, dx, P_plus_hh)
+            q_fix, q_sep = q_fix / kappa, q_sep / kappa
+            tested.append((q_fix * kappa, t - ref.t0))
+            if self.diag is not None:
+                self.diag.append((t, t - ref.t0, q_fix, q_sep, sep, kappa))
+            self._sep_max = max(self._sep_max, sep)
+            if max(q_fix, q_sep) > gate:
+                alarms.append((ref, q_fix, q_sep, sep))
+        if alarms:
+            ref, q_fix, q_sep, sep = alarms[-1]            # the youngest that sees it
+            self._open(ref.t0, reset=True, sep=sep)
+            self.refs = [r for r in self.refs if r.t0 <= ref.t0]
+            why = ("outside the dead-reckoning envelope" if q_fix > gate else
+                   "would separate the solution from the dead reckoning")
+            return Verdict(FixStatus.REJECTED, f"{why} since {ref.t0:.1f} s "
+                           f"(χ² {max(q_fix, q_sep):.3g}, {sep:.1f} m)", nis,
+                           reset_to=ref.flt, excluded_since=ref.t0)
+        self.streak = 0
+        self.used_streak += 1
+        if self.used_streak == 1:
+            self.t_healthy = t
+        if self.adapter is not None:
+            for q, age in tested:
+                self.adapter.on_reference(t, q, age)
+        return Verdict(FixStatus.USED, "", nis, apply=True)
+
+    def _innovation_drift(self):
+        """The reason if the recent whitened innovations have a mean: ``|Σ ν|² / n`` above
+        the gate of the references' false-alarm rate for a window of the last ``n`` fixes."""
+        wins = self.cfg.integrity.innovation_windows
+        gate = self.reference_gate(len(wins) / 2.0)
+        for n in wins:
+            if len(self.innov) < n:
+                break
+            q = float(np.sum(np.sum(self.innov[-n:], axis=0) ** 2)) / n
+            if q > gate:
+                return (f"the last {n} fixes pull the same way (their innovations sum to "
+                        f"χ² {q:.3g}): a drag")
+        return None
+
+    def reference_gate(self, n_refs: float) -> float:
+        """The χ² (2 dof) gate of the references' tests: ``false_alarms_per_hour`` shared
+        among the tests of an hour (two per reference and fix)."""
+        ig = self.cfg.integrity
+        tests = max(1, 2 * n_refs) * 3600.0 / max(self.fix_dt, 1e-3)
+        return chi2_gate(2, min(ig.false_alarms_per_hour / tests, ig.p_false_alarm))
+
+    def _against(self, ref, flt, m_pos, dx, P_plus_hh):
+        """(χ² of the fix against the reference, χ² of the separation ``M⁺ − b``, its size)."""
+        b = ref.flt
+        # the fix against the reference: its prediction differs from M's by their difference
+        d0 = enu_offset(b.ins.lat, b.ins.lon, b.ins.h, flt.ins.lat, flt.ins.lon, flt.ins.h)[:2]
+        r_b = m_pos.r + d0
+        Pb = b.P[:2, :2]
+        S_b = Pb + m_pos.R[:2, :2]
+        q_fix = float(r_b @ np.linalg.solve(S_b, r_b))
+        # the separation after M took the fix (dx is removed from M: x⁺ = x − dx)
+        d = d0 - dx[:2]
+        C = Pb - P_plus_hh
+        w, V = np.linalg.eigh(0.5 * (C + C.T))
+        w = np.maximum(w, self.cfg.integrity.separation_floor_m ** 2)
+        q_sep = float(np.sum((V.T @ d) ** 2 / w))
+        return q_fix, q_sep, float(np.hypot(*d))
+
+    def _judge_episode(self, flt, m_pos, t, nis) -> Verdict:
+        ep, ig = self.episode, self.cfg.integrity
+        ep.fixes += 1
+        in_gate = nis <= self.gate
+        fix = _RunFix(t, -m_pos.r[:2].copy(), float(np.sqrt(m_pos.R[0, 0])))
+        if self._latlon is not None:
+            if ep.origin is None:
+                ep.origin = self._latlon
+            fix.p = enu_offset(ep.origin[0], ep.origin[1], 0.0, self._latlon[0],
+                               self._latlon[1], 0.0)[:2]
+        if not ep.characterised:
+            self._characterise(ep, fix)
+        self.run.append(fix)
+        self.run = [f for f in self.run if f.t >= t - ig.run_max_s]
+        test = self._run_test(flt)
+        if test is not None and not test["white"]:
+            self.run = self.run[-1:]           # a scattered run starts again from this fix
+        if not in_gate:
+            ep.rejected += 1
+        if test is None:
+            return Verdict(FixStatus.SUSPECT if in_gate else FixStatus.REJECTED,
+                           f"a run of {len(self.run)} fixes is being checked" if in_gate else
+                           f"outside the dead-reckoning envelope (NIS {nis:.3g})", nis)
+        span = self.run[-1].t - self.run[0].t if len(self.run) > 1 else 0.0
+        if test["white"] and test["moves"]:
+            # the clean references still stand: a run outside any of their envelopes is
+            # the drag that reset M, not the GNSS healthy again
+            out = self._outside_references(flt, m_pos, t)
+            if out is not None:
+                return Verdict(FixStatus.SUSPECT if in_gate else FixStatus.REJECTED,
+                               f"{test['why']}, but outside the dead reckoning since "
+                               f"{out[0]:.1f} s (χ² {out[1]:.3g})", nis)
+        if test["white"] and test["moves"]:
+            still, add = self._fault_continues(ep, flt, test, t)
+            if add is not None and in_gate:
+                # the fault and health cannot be told apart: the fix is fused with the fault's
+                # possible offset in its σ (no better than the dead reckoning, and as honest)
+                return Verdict(FixStatus.DEGRADED, f"{test['why']}; {still}", nis, apply=True,
+                               add_R=add)
+            if still is not None:
+                return Verdict(FixStatus.SUSPECT if in_gate else FixStatus.REJECTED,
+                               f"{test['why']}, but as the fault would: {still}", nis)
+        if test["white"] and test["moves"] and in_gate:
+            self._close(t)
+            self.recoveries += 1
+            self.streak = 0
+            self.used_streak = 1
+            self.t_healthy = t
+            return Verdict(FixStatus.USED, f"GNSS healthy again ({test['why']})", nis, apply=True,
+                           run_velocity=test.get("velocity"))
+        if test["white"] and test["moves"] and span >= ig.reinit_after_s - 1e-9:
+            # the other hypothesis: the fixes agree with each other and move with the INS, but
+            # have stood outside its envelope this long — the dead reckoning is off by more
+            # than its σ (the INS is the faulty side): its position σ is opened to the offset
+            self._close(t, kind="ins-fault")
+            self.recoveries += 1
+            self.reinits += 1
+            self.streak = 0
+            self.used_streak = 1
+            self.t_healthy = t
+            return Verdict(FixStatus.USED, f"the INS was off: {test['why']} "
+                           f"{np.hypot(*test['offset']):.1f} m from it for {span:.0f} s", nis,
+                           apply=True, widen=test["offset"],
+                           run_velocity=test.get("velocity"))
+        why = test["why"]
+        if not in_gate:
+            why = f"outside the dead-reckoning envelope (NIS {nis:.3g}); {why}"
+        return Verdict(FixStatus.SUSPECT if in_gate else FixStatus.REJECTED, why, nis)
+
+    def _characterise(self, ep, fix):
+        """The fault's own behaviour from the first ``onset_s`` of the episode, while the dead
+        reckoning is still sharp: a smooth fault (a drag, a drift, a jump: the offsets fit a
+        line within the fixes' σ) is modelled as that line, to be extrapolated; a scattered
+        one (white or Gauss–Markov outliers) needs none (the run test sees it)."""
+        ig = self.cfg.integrity
+        ep.onset.append(fix)
+        span = ep.onset[-1].t - ep.onset[0].t
+        if span < ig.onset_s - 1e-9 or len(ep.onset) < ig.run_min_fixes:
+            return
+        ep.characterised = True
+        tt = np.array([f.t for f in ep.onset])
+        o = np.array([f.offset for f in ep.onset])
+        w = 1.0 / np.array([f.sigma for f in ep.onset]) ** 2
+        tc = float(np.sum(w * tt) / np.sum(w))
+        A = np.column_stack([np.ones_like(tt), tt - tc])
+        N = (A * w[:, None]).T @ A
+        coef = np.linalg.solve(N, (A * w[:, None]).T @ o)
+        res = o - A @ coef
+        chi = float(np.sum(w[:, None] * res**2))
+        # the line's σ: the fixes' and the dead reckoning's own drift over the onset
+        scale = max(chi / max(2 * (len(tt) - 2), 1), 1.0)
+        if chi <= chi2_gate(2 * (len(tt) - 2), self.cfg.integrity.p_false_alarm) * 4.0:
+            ep.fault = {"t": tc, "coef": coef, "cov": np.linalg.inv(N) * scale}
+
+    def _fault_continues(self, ep, flt, test, t):
+        """Is a run better explained by the smooth fault going on than by healthy fixes?
+        Its offset now against the fault's line extrapolated (H1) and against zero — the
+        dead reckoning's own error, σ from ``M`` (H0); the run stays suspect unless H0 wins
+        by the likelihood ratio of the gate, or the fault would by now sit within one σ of
+        the dead reckoning (then the two cannot be told apart, and taking the fixes costs no
+        more than the dead reckoning's own error). Returns the reason, or None."""
+        f = ep.fault
+        if f is None:
+            return None, None
+        dt = t - f["t"]
+        J = np.array([1.0, dt])
+        pred = f["coef"].T @ J                         # (2,) the fault's offset now
+        C_f = (J @ f["cov"] @ J) * np.eye(2)
+        P_r = flt.P[:2, :2] + np.eye(2) * test["offset_var"]
+        o = test["offset"]
+        S1, S0 = P_r + C_f, P_r
+        q1 = float((o - pred) @ np.linalg.solve(S1, o - pred))
+        q0 = float(o @ np.linalg.solve(S0, o))
+        llr = 0.5 * (q0 - q1) - 0.5 * np.log(np.linalg.det(S1) / np.linalg.det(S0))
+        if llr < -0.5 * self.gate:
+            return None, None
+        why = (f"its offset {np.hypot(*o):.1f} m against the fault's {np.hypot(*pred):.1f} m "
+               f"(log-likelihood ratio {llr:+.1f})")
+        if float(pred @ np.linalg.solve(flt.P[:2, :2], pred)) <= 1.0:
+            return (f"the fault would be within the dead reckoning's σ ({why})",
+                    np.outer(pred, pred) + C_f)
+        return why, None
+
+    def _outside_references(self, flt, m_pos, t):
+        """``(t0, χ²)`` of the youngest mature reference whose envelope the fix is outside,
+        or None."""
+        self.flush()
+        mature = self.mature(t)
+        gate = self.reference_gate(len(mature))
+        kappa = 1.0 if self.adapter is None else self.adapter.reference_ratio
+        zero = np.zeros(flt.nx)
+        P_hh = flt.P[:2, :2]
+        for ref in reversed(mature):
+            q_fix, _, _ = self._against(ref, flt, m_pos, zero, P_hh)
+            if self.diag is not None:
+                self.diag.append(("ref", t, t - ref.t0, q_fix, kappa, gate, np.sqrt(np.diag(ref.flt.P)[:2]).tolist()))
+            if q_fix / kappa > gate:
+                return ref.t0, q_fix / kappa
+        return None
+
+    def _run_test(self, flt):
+        """Do the fixes of the run move with the INS? None while the run is too short; else
+        ``white`` (their offsets from ``M`` scatter as their σ about a quadratic — the INS's
+        own drift over a few seconds — white outliers and a Gauss–Markov error do not),
+        ``moves`` (the offsets' rate at the run's end within what ``M``'s velocity σ allows:
+        a drag faster than the dead reckoning drifts does not), the offset and a reason."""
+        ig = self.cfg.integrity
+        run = self.run
+        if len(run) < ig.run_min_fixes or run[-1].t - run[0].t < ig.run_s - 1e-9:
+            return None
+        tt = np.array([f.t for f in run])
+        o = np.array([f.offset for f in run])
+        # the fixes' σ and the dead reckoning's own wander over the run (the velocity random
+        # walk, which no quadratic absorbs): ``q_v T³/3``
+        T = tt[-1] - tt[0]
+        wander = float(np.mean(flt.white_velocity_density()[:2])) * T**3 / 3.0
+        # and what a quadratic cannot follow of an acceleration error that changes as the
+        # specific force turns against an attitude error (a long dead reckoning's heading)
+        wander += (flt.acceleration_sigma() * T * T / 8.0) ** 2
+        s = np.sqrt(np.array([f.sigma for f in run]) ** 2 + wander)
+        w = 1.0 / s**2
+        tc = tt - tt[-1]
+        A = np.column_stack([np.ones_like(tc), tc, tc * tc])
+        Aw = A * w[:, None]
+        N = A.T @ Aw
+        coef = np.linalg.solve(N, Aw.T @ o)            # (3, 2): offset, rate, curvature
+        res = o - A @ coef
+        chi_res = float(np.sum(w[:, None] * res**2))
+        dof = 2 * (len(run) - 3)
+        white = chi_res <= chi2_gate(dof, ig.p_false_alarm)
+        rate = coef[1]
+        C = flt.P[3:5, 3:5] + np.eye(2) * np.linalg.inv(N)[1, 1]
+        q_rate = float(rate @ np.linalg.solve(C, rate))
+        moves = q_rate <= self.gate
+        n, dur = len(run), tt[-1] - tt[0]
+        if not white:
+            why = f"the fixes scatter beyond their σ (χ² {chi_res:.3g} for {dof})"
+        elif not moves:
+            why = f"the fixes drift against the INS at {np.hypot(*rate):.2f} m/s (χ² {q_rate:.3g})"
+        else:
+            why = f"{n} fixes over {dur:.0f} s move with the INS"
+        if self.diag is not None:
+            self.diag.append(("run", tt[-1], n, dur, white, moves, rate.tolist(), np.sqrt(np.diag(C)).tolist(), coef[0].tolist(), chi_res, dof))
+        Ni = np.linalg.inv(N)
+        out = {"white": white, "moves": moves, "offset": coef[0], "why": why,
+               "offset_var": float(Ni[0, 0]), "rate": rate, "rate_cov": np.eye(2) * Ni[1, 1]}
+        last = [f for f in run if f.t >= tt[-1] - ig.velocity_span_s - 1e-9]
+        if len(last) >= 4 and all(f.p is not None for f in last):
+            # the fixes' own velocity at the run's end (a quadratic through their positions
+            # over the last seconds): what the run measures of the velocity, whatever M's
+            # drift did during it
+            tl = np.array([f.t for f in last]) - tt[-1]
+            Al = np.column_stack([np.ones_like(tl), tl, tl * tl])
+            wf = 1.0 / np.array([f.sigma for f in last]) ** 2
+            Nf = (Al * wf[:, None]).T @ Al
+            pl = np.array([f.p for f in last])
+            cf = np.linalg.solve(Nf, (Al * wf[:, None]).T @ pl)
+            res_f = pl - Al @ cf
+            k = max(float(np.sum(wf[:, None] * res_f**2)) / max(2 * (len(last) - 3), 1), 1.0)
+            out["velocity"] = (cf[1], np.eye(2) * np.linalg.inv(Nf)[1, 1] * k)
+        return out
+
+    def _open(self, t, reset, sep=0.0):
+        self.innov = []
+        self.episode = Episode(t, reset=reset, kind="drag" if reset else "outliers",
+                               max_separation_m=sep)
+        self.run = []
+        self.streak = 0
+        self.used_streak = 0
+        if reset:
+            self.alarms += 1
+
+    def _close(self, t, kind=None):
+        ep = self.episode
+        ep.t_end = t
+        if kind is not None:
+            ep.kind = kind
+        ep.max_separation_m = max(ep.max_separation_m, self._sep_max if ep.reset else 0.0)
+        if not ep.reset and ep.fixes and ep.rejected == ep.fixes - len(self.run):
+            ep.kind = "outliers"
+        self.episodes.append(ep)
+        self.episode = None
+        self.run = []
+        self._sep_max = 0.0
+
+    def on_outage(self, t, since):
+        """No fix since ``since`` (the navigator's check at each epoch): an outage, recorded
+        as an episode; it does not change how the next fix is judged (no evidence against
+        the GNSS) and ends with it."""
+        if self.outage is None and np.isfinite(since) and t - since > self.cfg.integrity.outage_s:
+            self.outage = Episode(since, kind="outage")
+            self.used_streak = 0
+
+    def _end_outage(self, t):
+        if self.outage is not None:
+            self.outage.t_end = t
+            self.episodes.append(self.outage)
+            self.outage = None
+
+    def finish(self, t):
+        for ep in (self.episode, self.outage):
+            if ep is not None:
+                ep.t_end = t
+                self.episodes.append(ep)
+        self.episode = self.outage = None
+
+    # ------------------------------------------------------------------ integrity
+    def protection_level(self, flt, t) -> float:
+        """Horizontal protection level at the configured integrity risk, m: ``M``'s own bound,
+        and — while references stand behind it — the largest undetected fault the youngest
+        mature reference allows (its detection threshold on the separation plus its bound)."""
+        Ph = flt.P[:2, :2]
+        pl = self.k_pl * float(np.sqrt(max(np.linalg.eigvalsh(Ph)[-1], 0.0)))
+        if self.episode is not None:
+            return pl
+        mat = self.mature(t)
+        if mat:
+            b = mat[-1].flt
+            Pb = b.P[:2, :2]
+            C = Pb - Ph
+            lam = float(max(np.linalg.eigvalsh(0.5 * (C + C.T))[-1], 0.0))
+            pl = max(pl, float(np.sqrt(self.gate * lam))
+                     + self.k_pl * float(np.sqrt(max(np.linalg.eigvalsh(Pb)[-1], 0.0))))
+        return pl
+
+
+__all__ = ["FaultBank", "Reference", "Episode", "Verdict"]

@@ -1,0 +1,365 @@
+"""Measurements of the error-state filter as small objects (DESIGN §9; pyins's ``Position``).
+
+Each measurement holds its data and σ and builds, for a filter's current state, the residual
+``r = h(x̃) − z``, the Jacobian ``H = ∂h/∂δx`` and the noise ``R`` (:meth:`Measurement.model`);
+:meth:`selfnav.ins.ekf.InsGnssFilter.update` applies them, the policy
+(:mod:`selfnav.ins.policy`) judges them first. A new aid is a class here, not a branch in the
+navigator.
+
+**GNSS position** at the antenna and at the fix's time. The INS state of stamp ``t`` is the
+truth at ``t + ε`` (``ε`` the IMU time offset); the fix at true time ``t_k`` is compared with the
+state of true time ``t_s ≥ t_k`` moved back by the lead ``τ = t_s − t_k`` (under one IMU
+sample when the navigator queues fixes by true time)::
+
+    h(x) = r_INS − v^n τ + C_b^n l̂,   ∂h/∂δr = I, ∂h/∂ψ = [C_b^n l̂ ×], ∂h/∂δl = C_b^n,
+                                      ∂h/∂δε = −v^n                     (τ grows with ε)
+
+**GNSS velocity** at the antenna, reported ``λ_v`` late (receivers that difference positions or
+smooth the Doppler give the velocity of the last interval: 0.13 s on drive_0708)::
+
+    h(x) = v^n − a^n (τ + λ_v) + C_b^n (ω_b × l̂),  ∂h/∂δε = ∂h/∂δλ_v = −a^n
+
+**Non-holonomic constraint** in the *vehicle* frame at a point that does not slip sideways (the
+rear-axle centre): ``v_v = C_vb (C_bn^T v^n + ω_b × l_nhc)`` with ``C_vb = exp([μ×])``,
+μ = (pitch, 0, yaw) of the IMU relative to the vehicle; ``z = (v_v,R, v_v,U) = 0``.
+
+**Wheel speed** (odometer): the forward speed at the NHC point scaled by ``1 + k``.
+
+**Roads** (:mod:`selfnav.roads.aid`): the distance across the road's centre line (and along it
+at a corner), the road heading, a level road (``v_U = 0``).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numba
+import numpy as np
+
+from selfnav import attitude as att
+from selfnav.attitude import rotvec_to_dcm3, skew3
+from selfnav.earth import enu_offset
+from selfnav.ins.ekf import IP, IV
+
+#: indices of the position / velocity error states (the first six)
+_POS = (0, 1, 2)
+
+
+@dataclass
+class Model:
+    """A measurement linearised at a filter's state: residual ``h(x̃) − z``, ``H``, ``R``."""
+
+    kind: str
+    r: np.ndarray
+    H: np.ndarray
+    R: np.ndarray
+
+    def rows(self, idx) -> "Model":
+        """The model restricted to some of its rows."""
+        idx = list(idx)
+        return Model(self.kind, self.r[idx], self.H[idx], self.R[np.ix_(idx, idx)])
+
+
+class Measurement:
+    """Base class: ``kind`` names it in logs; :meth:`model` linearises it at ``flt``."""
+
+    kind = "measurement"
+
+    def model(self, flt) -> Model:  # pragma: no cover - interface
+        raise NotImplementedError
+
+
+@dataclass
+class PositionFix(Measurement):
+    """A GNSS position (rad, rad, m) at true time ``t``; σ horizontal per axis and vertical, m."""
+
+    t: float
+    lat: float
+    lon: float
+    h: float
+    sigma_h: float
+    sigma_v: float
+    kind = "position"
+
+    def model(self, flt) -> Model:
+        ins, lay = flt.ins, flt.layout
+        C_bn = ins.C_nb.T
+        l_n = C_bn @ flt.lever_b
+        z = enu_offset(ins.lat, ins.lon, ins.h, self.lat, self.lon, self.h)
+        v = ins.velocity_n
+        lead = flt.t_true - self.t
+        r = l_n - v * lead - z
+        H = np.zeros((3, flt.nx))
+        H[0, 0] = H[1, 1] = H[2, 2] = 1.0
+        H[:, IP] = skew3(l_n)
+        if lay.lever is not None:
+            H[:, lay.lever] = C_bn
+        if lay.toff is not None:
+            H[:, lay.toff.start] = -v
+        R = np.diag([self.sigma_h**2, self.sigma_h**2, self.sigma_v**2])
+        return Model(self.kind, r, H, R)
+
+    def offset_from(self, flt) -> np.ndarray:
+        """ENU metres of the fix from the filter's predicted antenna position."""
+        return -self.model(flt).r
+
+
+@dataclass
+class VelocityFix(Measurement):
+    """A GNSS velocity (ENU, m/s; NaN vertical: horizontal only) at true time ``t``; σ per
+    horizontal axis and vertical, m/s."""
+
+    t: float
+    velocity_n: np.ndarray
+    sigma: float
+    sigma_up: float
+    kind = "velocity"
+
+    def model(self, flt) -> Model:
+        ins, lay = flt.ins, flt.layout
+        C_bn = ins.C_nb.T
+        v_lever = C_bn @ np.cross(flt.omega_b, flt.lever_b)
+        a_n = flt.acceleration_n
+        delay = (flt.t_true - self.t) + flt.velocity_lag
+        vz = np.asarray(self.velocity_n, float)
+        rows = [0, 1, 2] if np.isfinite(vz[2]) else [0, 1]
+        r = ins.velocity_n + v_lever - a_n * delay - np.where(np.isfinite(vz), vz, 0.0)
+        H = np.zeros((3, flt.nx))
+        H[0, 3] = H[1, 4] = H[2, 5] = 1.0
+        H[:, IP] = skew3(v_lever)
+        if lay.lever is not None:
+            H[:, lay.lever] = C_bn @ skew3(flt.omega_b)
+        if lay.toff is not None:
+            H[:, lay.toff.start] = -a_n
+        if lay.vlag is not None:
+            H[:, lay.vlag.start] = -a_n
+        R = np.diag([self.sigma**2, self.sigma**2, self.sigma_up**2])
+        return Model(self.kind, r, H, R).rows(rows)
+
+
+@numba.njit(cache=True)
+def _nhc_rows(s, w_b, lever, mu, mu_col, nx):  # pragma: no cover - compiled
+    """Residual and Jacobian of the non-holonomic constraint (:class:`NonHolonomic`) at
+    strapdown state ``s``; ``mu_col`` the first column of the mounting block or -1."""
+    C_nb = np.empty((3, 3))
+    for i in range(3):
+        for j in range(3):
+            C_nb[i, j] = s[6 + 3 * j + i]          # transpose of C_bn
+    v = s[3:6]
+    vv = C_nb @ v
+    vv[0] += w_b[1] * lever[2] - w_b[2] * lever[1]
+    vv[1] += w_b[2] * lever[0] - w_b[0] * lever[2]
+    vv[2] += w_b[0] * lever[1] - w_b[1] * lever[0]
+    C_vn = C_nb
+    if mu_col >= 0 or mu[0] != 0.0 or mu[1] != 0.0:
+        x, z = mu[0], mu[1]
+        th2 = x * x + z * z
+        if th2 < 1e-12:
+            a1, b1 = 1.0, 0.5
+        else:
+            th = np.sqrt(th2)
+            a1, b1 = np.sin(th) / th, (1.0 - np.cos(th)) / th2
+        K = np.array([[0.0, -z, 0.0], [z, 0.0, -x], [0.0, x, 0.0]])
+        C_vb = np.eye(3) + a1 * K + b1 * (K @ K)
+        C_vn = C_vb @ C_nb
+        vv = C_vb @ vv
+    H = np.zeros((2, nx))
+    r = np.empty(2)
+    Sv = np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+    for a, row in enumerate((0, 2)):
+        r[a] = vv[row]
+        for j in range(3):
+            H[a, 3 + j] = C_vn[row, j]
+        hp = -(C_vn[row] @ Sv)
+        for j in range(3):
+            H[a, 6 + j] = hp[j]
+    if mu_col >= 0:
+        # -[v_v×] restricted to rows (x, z) and columns (x, z)
+        H[0, mu_col] = 0.0
+        H[0, mu_col + 1] = -vv[1]
+        H[1, mu_col] = vv[1]
+        H[1, mu_col + 1] = 0.0
+    return r, H
+
+
+def vehicle_velocity(flt):
+    """Velocity at the NHC point (rear axle) in the vehicle frame and ``C_vn``:
+    ``(v_v, C_vn)`` (module docstring)."""
+    C_nb = flt.ins.C_nb
+    vv = C_nb @ flt.ins.velocity_n
+    C_vn = C_nb
+    lever = flt.nhc_lever_b
+    if lever[0] or lever[1] or lever[2]:
+        vv = vv + np.cross(flt.omega_b, lever)
+    if flt.layout.mu is not None or flt.mu[0] or flt.mu[1]:
+        C_vb = rotvec_to_dcm3(np.array([flt.mu[0], 0.0, flt.mu[1]]))
+        C_vn = C_vb @ C_nb
+        vv = C_vb @ vv
+    return vv, C_vn
+
+
+@dataclass
+class NonHolonomic(Measurement):
+    """A wheeled vehicle does not slide sideways nor leave the ground: the lateral and
+    vertical velocity at the NHC point are zero with σ ``sigma`` and ``sigma_up`` m/s."""
+
+    sigma: float
+    sigma_up: float
+    kind = "nhc"
+
+    def model(self, flt) -> Model:
+        mu_col = -1 if flt.layout.mu is None else flt.layout.mu.start
+        r, H = _nhc_rows(flt.ins.state_array(), flt.omega_b, flt.nhc_lever_b, flt.mu, mu_col,
+                         flt.nx)
+        return Model(self.kind, r, H, np.diag([self.sigma**2, self.sigma_up**2]))
+
+
+@dataclass
+class ZeroVelocity(Measurement):
+    """The IMU is still: zero velocity with σ ``sigma`` m/s per axis."""
+
+    sigma: float
+    kind = "zupt"
+
+    def model(self, flt) -> Model:
+        H = np.zeros((3, flt.nx))
+        H[0, 3] = H[1, 4] = H[2, 5] = 1.0
+        return Model(self.kind, flt.ins.velocity_n, H, np.eye(3) * self.sigma**2)
+
+
+@dataclass
+class WheelSpeed(Measurement):
+    """Wheel speed, m/s, at the NHC point in the vehicle frame, scaled by ``1 + k``::
+
+        h = (1 + k̂) v_v,F,   ∂h/∂δv = (1 + k̂) C_vn[F],   ∂h/∂ψ = −(1 + k̂) C_vn[F] [v^n×],
+        ∂h/∂δk = v_v,F,      ∂h/∂δμ = −(1 + k̂) [v_v×][F] (pitch, yaw)
+    """
+
+    speed: float
+    sigma: float
+    kind = "odometer"
+
+    def model(self, flt) -> Model:
+        vv, C_vn = vehicle_velocity(flt)
+        lay = flt.layout
+        g = 1.0 + flt.odo_scale
+        H = np.zeros((1, flt.nx))
+        H[0, IV] = g * C_vn[1]
+        H[0, IP] = -g * C_vn[1] @ skew3(flt.ins.velocity_n)
+        if lay.mu is not None:
+            H[0, lay.mu] = -g * skew3(vv)[1, [0, 2]]
+        if lay.odo is not None:
+            H[0, lay.odo.start] = vv[1]
+        return Model(self.kind, np.array([g * vv[1] - float(self.speed)]), H,
+                     np.array([[self.sigma**2]]))
+
+
+def _heading_error(flt, heading):
+    _, _, hdg = att.euler_from_dcm_nb(flt.ins.C_nb)
+    return float(np.angle(np.exp(1j * (hdg - heading))))
+
+
+@dataclass
+class Heading(Measurement):
+    """True heading (rad, clockwise from North), e.g. magnetic heading plus declination (seed
+    004 (12)), σ rad. ``ψ_U`` raises the computed heading (``C̃ = (I − [ψ]) C``)."""
+
+    heading: float
+    sigma: float
+    kind = "heading"
+
+    def model(self, flt) -> Model:
+        H = np.zeros((1, flt.nx))
+        H[0, 8] = 1.0
+        return Model(self.kind, np.array([_heading_error(flt, self.heading)]), H,
+                     np.array([[self.sigma**2]]))
+
+
+@dataclass
+class RoadLine(Measurement):
+    """The vehicle is on a road's centre line (and heads along it).
+
+    ``normal_n``: unit horizontal normal of the road at the foot point (ENU); ``offset``: signed
+    distance of the INS position from the line along it, m, σ ``sigma``; optionally the road
+    direction ``heading`` (rad) with σ ``sigma_heading``, and a position along the road
+    (a corner the map places: unit direction ``along_n``, offset ``along_offset``, σ
+    ``sigma_along``).
+    """
+
+    normal_n: np.ndarray
+    offset: float
+    sigma: float
+    heading: float | None = None
+    sigma_heading: float | None = None
+    along_n: np.ndarray | None = None
+    along_offset: float | None = None
+    sigma_along: float | None = None
+    kind = "road"
+
+    def model(self, flt) -> Model:
+        rows, res, var = [], [], []
+        h = np.zeros(flt.nx)
+        h[0:2] = self.normal_n
+        rows.append(h)
+        res.append(self.offset)
+        var.append(self.sigma**2)
+        if self.along_n is not None:
+            h1 = np.zeros(flt.nx)
+            h1[0:2] = self.along_n
+            rows.append(h1)
+            res.append(self.along_offset)
+            var.append(self.sigma_along**2)
+        if self.heading is not None:
+            h2 = np.zeros(flt.nx)
+            h2[8] = 1.0
+            rows.append(h2)
+            res.append(_heading_error(flt, self.heading))
+            var.append(self.sigma_heading**2)
+        return Model(self.kind, np.array(res, float), np.array(rows), np.diag(var))
+
+
+@dataclass
+class RunVelocity(Measurement):
+    """The horizontal velocity a run of fixes shows (ENU m/s, covariance 2×2): the rate of
+    their offsets from a dead reckoning (:mod:`selfnav.ins.hypotheses`)."""
+
+    velocity_n: np.ndarray
+    cov: np.ndarray
+    kind = "run velocity"
+
+    def model(self, flt) -> Model:
+        H = np.zeros((2, flt.nx))
+        H[0, 3] = H[1, 4] = 1.0
+        r = flt.ins.velocity_n[:2] - np.asarray(self.velocity_n, float)
+        return Model(self.kind, r, H, np.asarray(self.cov, float))
+
+
+@dataclass
+class LevelRoad(Measurement):
+    """A level-road prior: the vertical velocity is zero within ``sigma`` m/s."""
+
+    sigma: float
+    kind = "level"
+
+    def model(self, flt) -> Model:
+        H = np.zeros((1, flt.nx))
+        H[0, 5] = 1.0
+        return Model(self.kind, np.array([flt.ins.velocity_n[2]]), H,
+                     np.array([[self.sigma**2]]))
+
+
+@dataclass
+class AlongTrackWiden:
+    """Not a measurement: process noise along the track, (m/s)²/s × ``dt`` (the road aid's
+    along-track speed variance while the map judges GNSS unhealthy)."""
+
+    q_along: float
+    dt: float
+
+    def apply(self, flt, heading):
+        u = np.array([np.sin(heading), np.cos(heading)])
+        flt.P[3:5, 3:5] += np.outer(u, u) * (self.q_along * self.dt)
+
+
+__all__ = ["Model", "Measurement", "PositionFix", "VelocityFix", "NonHolonomic",
+           "ZeroVelocity", "WheelSpeed", "Heading", "RoadLine", "LevelRoad", "RunVelocity",
+           "vehicle_velocity", "_POS"]
