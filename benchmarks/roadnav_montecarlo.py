@@ -71,7 +71,8 @@ def table(summary: dict) -> str:
     rows = ["| per drive | median | 95th percentile | worst | pooled RMS |",
             "| --- | --- | --- | --- | --- |"]
     names = {"along_rms_m": "along-track RMS, m", "cross_rms_m": "cross-track RMS, m",
-             "horizontal_rms_m": "horizontal RMS, m", "off_route_s": "longest off the route, s"}
+             "horizontal_rms_m": "horizontal RMS, m", "off_route_s": "longest off the route, s",
+             "err_sigma_p95": "p95 of error / σ_h", "beyond_5sigma": "share of rows beyond 5σ"}
     for k, name in names.items():
         d = summary[k]
         pooled = f"{d['pooled']:.2f}" if "pooled" in d else "—"
@@ -89,13 +90,20 @@ def main() -> None:
     ap.add_argument("--json", action="store_true")
     ap.add_argument("--replay", type=int, help="print how to replay the drive of this run seed")
     ap.add_argument("--write", type=Path, default=Path("roadnav_replay"))
+    ap.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
+                    help="a campaign parameter (selfnav.campaigns.ROADNAV_DEFAULTS), e.g. "
+                         "map_aid=0, grade=mixed, kinds=white,gm,outage")
     a = ap.parse_args()
     if a.replay is not None:
         replay(a.replay, a.odometer, a.write)
         return
     load0 = os.getloadavg()
     t0 = time.perf_counter()
-    r = run_montecarlo("roadnav", a.runs, seed=a.seed, params={"odometer": int(a.odometer)},
+    params = {"odometer": int(a.odometer)}
+    for p in a.param:
+        k, _, v = p.partition("=")
+        params[k] = type(campaigns.ROADNAV_DEFAULTS[k])(v)
+    r = run_montecarlo("roadnav", a.runs, seed=a.seed, params=params,
                        workers=a.workers, chunk_size=1)
     wall = time.perf_counter() - t0
     if a.out:
@@ -104,8 +112,10 @@ def main() -> None:
     info = {"runs": a.runs, "master_seed": a.seed, "odometer": a.odometer,
             "workers": r.workers, "wall_s": wall, "load_average_start": load0,
             "load_average_end": os.getloadavg(), "cpu_s_per_run": s["cpu_s_per_run"],
+            "params": params,
             **{k: s[k] for k in ("along_rms_m", "cross_rms_m", "horizontal_rms_m",
-                                 "off_route_s", "runs_off_route_over_10_s",
+                                 "off_route_s", "err_sigma_p95", "beyond_5sigma",
+                                 "runs_off_route_over_10_s",
                                  "runs_off_route_over_20_s", "worst_along",
                                  "worst_off_route")},
             "rms_normalized_error": s["rms_normalized_error"]}

@@ -2,7 +2,7 @@
 
 The record (PSINS ``transfer_align_fog_mems.mat``, 100 s of a car driving north) holds a
 low-cost MEMS IMU at 100 Hz and a fibre-optic INS (FOG-INS) navigating at 10 Hz beside it.
-There is no GNSS. This module runs :func:`selfnav.ins.run_filter` on the MEMS increments with
+There is no GNSS. This module runs :class:`selfnav.ins.Navigator` on the MEMS increments with
 the **FOG-INS position, decimated to 1 Hz and given σ ≈ 1 m, as the "GNSS" aiding** (the
 only position source in the record), and measures the MEMS solution's attitude and velocity
 against the FOG-INS.
@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from selfnav import attitude as att
-from selfnav.ins import FilterConfig, run_filter
+from selfnav.ins import FilterConfig, Navigator, feed
 from selfnav.types import GnssData
 from selfnav.io.psins_mat import read_fog_mems
 
@@ -177,7 +177,9 @@ def evaluate_fog_mems(folder, *, settle_s: float = 30.0, gnss_rate_hz: float = 1
         cfg.setdefault("use_velocity", True)
     fc = default_config(**cfg)
     init = initial_state(data, att_error_deg, vel_error)
-    res = run_filter(data["imu"], gnss, fc, init=init, smooth=smooth)
+    nav = Navigator(fc, init=init, smoother=smooth, out_rate_hz=0.0,
+                    imu_time_offset_s=0.0)
+    res = feed(nav, data["imu"], gnss).result(smooth)
     tr = res.trajectory
     j, ok = _match(data["t_ref"], tr.t)
     ok &= data["t_ref"] > init["t"] + 1e-6
@@ -214,7 +216,7 @@ def evaluate_fog_mems(folder, *, settle_s: float = 30.0, gnss_rate_hz: float = 1
         "gyro_bias_dph": (bg[-1] / DPH).tolist(),
         "heading_err_final_deg": float(np.degrees(e_att[-1, 2])),
         "accel_bias": res.accel_bias[js][-1].tolist(),
-        "fixes_accepted": res.stats["accepted"], "fixes": res.stats["fixes"],
+        "fixes_accepted": res.stats["fix_status"]["used"], "fixes": res.stats["fixes"],
         "t": tref, "att_err_deg": np.degrees(e_att), "vel_err": e_vel,
         "gyro_bias_t_dph": bg / DPH, "sigma_att_deg": np.degrees(res.sigma_att[js]),
     }

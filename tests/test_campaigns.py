@@ -22,7 +22,7 @@ def test_scenarios_follow_the_seed_and_the_parameters():
         starts.append(wins[0].start == 0.0)
         assert len(wins) == 2 and wins[0].end <= wins[1].start
         assert "odometer" not in spec
-    assert kinds == {"white", "gm", "drift"} and maps == set(campaigns.MAPS)
+    assert kinds == {"white", "gm", "drift", "drag"} and maps == set(campaigns.MAPS)
     assert 30.0 <= min(durations) and max(durations) <= 300.0
     assert 0.4 < np.mean(starts) < 0.6                        # start-up windows, half the drives
     spec, _, _ = campaigns.roadnav_scenario(7, {**p, "odometer": 1, "map": "helsinki_centre"})

@@ -24,12 +24,12 @@ def test_simulate_navigate_evaluate(sim, tmp_path, capsys):
                           "--out", sol, "--grade", "industrial", "--json"], capsys)
     assert code == 0, err
     d = json.loads(out)
-    assert d["method"] == "ekf" and d["accepted"] > 50
+    assert d["method"] == "ekf" and d["fix_status"]["used"] > 50
     # the CSV starts with its header row; what produced it is in the JSON sidecar
     assert sol.read_text().startswith("t,lat_deg,lon_deg,h_m")
     side = json.loads((tmp_path / "sol.csv.json").read_text())
     assert side["notes"][0].startswith("selfnav navigate") and side["datum"] == "wgs84"
-    assert side["stats"]["accepted"] == d["accepted"]
+    assert side["stats"]["fix_status"] == d["fix_status"]
     code, out, err = run(["evaluate", "--truth", sim / "truth.csv", "--solution", sol, "--json"],
                          capsys)
     assert code == 0, err
@@ -44,9 +44,9 @@ def test_simulate_navigate_evaluate(sim, tmp_path, capsys):
     assert json.loads(out)["map"] is not None
 
 
-def test_navigate_vehicle_frame_and_shadow_options(sim, tmp_path, capsys):
+def test_navigate_vehicle_frame_options(sim, tmp_path, capsys):
     """--mount-states reports the IMU mounting (the simulated IMU is aligned with the car:
-    near zero), --nhc-lever is parsed, --no-shadows runs the window test alone."""
+    near zero), --nhc-lever is parsed, --no-nhc runs without the constraint."""
     capsys.readouterr()
     base = ["navigate", "--imu", sim / "imu.csv", "--gnss", sim / "gnss.csv", "--grade",
             "industrial", "--json"]
@@ -55,9 +55,9 @@ def test_navigate_vehicle_frame_and_shadow_options(sim, tmp_path, capsys):
     assert code == 0, err
     d = json.loads(out)
     assert len(d["mounting_deg"]) == 2 and max(abs(x) for x in d["mounting_deg"]) < 1.0
-    code, out, err = run(base + ["--out", tmp_path / "b.csv", "--no-shadows"], capsys)
+    code, out, err = run(base + ["--out", tmp_path / "b.csv", "--no-nhc"], capsys)
     assert code == 0, err
-    assert json.loads(out)["shadow_resets"] == 0
+    assert json.loads(out)["fix_status"]["used"] > 50
     _err(capsys, base + ["--out", tmp_path / "c.csv", "--nhc-lever", "1,2"], "--nhc-lever")
 
 

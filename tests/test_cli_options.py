@@ -44,7 +44,7 @@ def test_help_lists_choices_and_no_negative_negatives(capsys):
     nav = _help(capsys, "navigate")
     for needle in ("[ekf|seed]", "[auto|csv|psins|psins-csv|rtklibexplorer|kfgins|ulog]",
                    "[wgs84|pz90.11|pz90|sk42]", "[auto|navigation|tactical|industrial|consumer]",
-                   "--window-test / --no-window-test", "A FILE"):
+                   "--nhc / --no-nhc", "--out-rate HZ", "A FILE"):
         assert needle in " ".join(nav.split()).replace("[ ", "["), needle
     assert "A FOLDER" in " ".join(_help(capsys, "simulate").split())
     assert "A FOLDER" in " ".join(_help(capsys, "demo").split())

@@ -5,7 +5,6 @@ import pytest
 
 from selfnav.earth import enu_offset, offset_to_geodetic
 from selfnav.ins import FilterConfig, InsGnssFilter, calibrate
-from selfnav.ins.guard import FixChain, kinematic_consistent
 from selfnav.sensors import imu_grade
 from selfnav.sim.scenarios import simulate
 from selfnav.units import DEG
@@ -98,80 +97,56 @@ def _chain_fixes(n=120, dt=0.25, speed=12.0, sigma=0.01, seed=0):
     return t, p, v
 
 
-def test_fix_chain_anchors_clean_fixes_and_breaks_at_a_jump_or_a_drift():
-    t, p, v = _chain_fixes()
-    chain = FixChain()
-    anchored = [chain.add(t[k], p[k], v[k], 0.01, 0.05, True)[1] for k in range(len(t))]
-    assert all(anchored[1:])
-    # a 3 m jump breaks the chain at once
-    chain = FixChain()
-    q = p.copy()
-    q[60:] += [3.0, 0.0]
-    links = [chain.add(t[k], q[k], v[k], 0.01, 0.05, True)[0] for k in range(len(t))]
-    assert not links[60] and all(links[60 + 21:])     # again once the 5 s window is past it
-    # a drift of 0.3 m/s that the velocity does not show breaks the long link within seconds
-    chain = FixChain()
-    d = p.copy()
-    d[40:] += np.outer(t[40:] - t[40], [0.3, 0.0])
-    links = [chain.add(t[k], d[k], v[k], 0.01, 0.05, True)[0] for k in range(len(t))]
-    assert not all(links[40:60])
-    # a change of the receiver's quality flag (RTK fixed -> float) breaks the chain
-    chain = FixChain()
-    qual = np.where(np.arange(len(t)) < 50, 1, 2)
-    links = [chain.add(t[k], p[k], v[k], 0.01, 0.05, True, qual[k])[0] for k in range(len(t))]
-    assert all(links[1:50]) and not links[50] and links[51]
-    # no velocity: never anchored
-    chain = FixChain()
-    assert not any(chain.add(t[k], p[k], None, 0.01, 0.05, True)[1] for k in range(10))
-
-
-def test_kinematic_consistency_separates_white_outliers():
-    rng = np.random.default_rng(3)
-    t = np.arange(12.0)
-    track = np.column_stack([10.0 * t, 0.3 * t**2])
-    sig = np.full(12, 3.0)
-    assert kinematic_consistent(t, track + rng.normal(0, 3.0, (12, 2)), sig)
-    assert not kinematic_consistent(t, track + rng.normal(0, 200.0, (12, 2)), sig)
-    assert not kinematic_consistent(t[:5], track[:5], sig[:5])      # too short to tell
-
-
 def test_noise_scale_rises_on_overconfidence_and_never_falls_below_one():
+    from selfnav.ins.config import NoiseAdaptation
+
     cfg = FilterConfig.for_grade("industrial")
     flt = InsGnssFilter(cfg, 0.0, 0.9, 0.4, 10.0, np.zeros(3), np.eye(3))
-    ad = calibrate.NoiseAdapter()
+    ad = calibrate.NoiseAdapter(NoiseAdaptation())
     for _ in range(200):
         ad.on_fix(flt, 40.0, 2)              # NIS 20 per dimension, fix after fix
-    assert flt.q_scale > 50.0
+    assert flt.q_scale > 5.0
     for _ in range(5000):
         ad.on_fix(flt, 0.1, 2)
     assert flt.q_scale == 1.0
-    # the shadows' variance ratio from the share of χ² beyond the median: honest ≈ 1, errors
-    # with 4× the predicted variance ≈ 4 (robust to a heavy tail)
+
+
+def test_reference_ratio_follows_the_dead_reckoning_errors_and_settles():
+    """The references' variance ratio κ̂ from their χ² (mean over a memory in time): honest
+    ≈ 1; errors with 4× the predicted variance ≈ 4; λ then moves to the λ that makes the
+    references honest (a fixed point, not a ratchet)."""
+    from selfnav.ins.config import NoiseAdaptation
+
     rng = np.random.default_rng(0)
     for kappa in (1.0, 4.0):
-        ad = calibrate.NoiseAdapter()
-        for c in rng.chisquare(2, 3000) * kappa:
-            ad.on_shadow(c, 2)
-        assert ad.dr_ratio == pytest.approx(kappa, rel=0.35)
-        assert ad.shadow_scale == pytest.approx(2.0 * np.sqrt(max(kappa, 1.0)), rel=0.2)
+        ad = calibrate.NoiseAdapter(NoiseAdaptation())
+        for k, c in enumerate(rng.chisquare(2, 3000) * kappa):
+            ad.on_reference(float(k), c, 20.0, 1.0)
+        assert ad.reference_ratio == pytest.approx(kappa, rel=0.35)
+    ad = calibrate.NoiseAdapter(NoiseAdaptation())
+    flt = InsGnssFilter(FilterConfig.for_grade("industrial"), 0.0, 0.9, 0.4, 10.0, np.zeros(3),
+                        np.eye(3))
+    lam = []
+    for k in range(3000):
+        # the references see 4× their variance while propagated with λ, 1× once λ ≈ 4
+        ad.on_reference(float(k), rng.chisquare(2) * 4.0 / flt.q_scale, 20.0, flt.q_scale)
+        ad.on_fix(flt, 2.0, 2)
+        lam.append(flt.q_scale)
+    assert np.median(lam[-500:]) == pytest.approx(4.0, rel=0.3)
+    assert max(lam) < 8.0
 
 
-def test_output_trajectory_moves_rows_to_the_antenna_and_to_true_time():
-    """The row at stamp t is the INS at t + ε̂ shifted back by v ε̂, plus C_b^n l̂."""
-    from selfnav.ins.navigator import FilterResult, output_trajectory
-    from selfnav.types import Trajectory
-
-    n = 3
-    lat, lon = np.full(n, 0.9), np.full(n, 0.4)
-    v = np.tile([10.0, 0.0, 0.0], (n, 1))
-    tr = Trajectory(np.arange(n, dtype=float), lat, lon, np.zeros(n), v, np.tile(np.eye(3), (n, 1, 1)))
-    res = FilterResult(tr, *[np.zeros((n, 3))] * 5, np.zeros(0), np.zeros(0), np.zeros((0, 3)),
-                       np.zeros(0), np.zeros(0), lever_arm=np.tile([0.0, 1.0, 0.0], (n, 1)),
-                       time_offset=np.full(n, 0.1))
-    out = output_trajectory(res, antenna=True)
-    d = enu_offset(0.9, 0.4, 0.0, out.lat[0], out.lon[0], out.h[0])
-    # C_nb = I: body y (forward) is North; the INS leads by 0.1 s at 10 m/s East
-    assert d == pytest.approx([-1.0, 1.0, 0.0], abs=1e-6)
-    lat2, lon2, _ = offset_to_geodetic(0.9, 0.4, 0.0, np.array([1.0, 0.0, 0.0]))
-    assert lat2 == pytest.approx(0.9) and lon2 > 0.4
-    assert DEG > 0
+def test_vibration_level_ignores_smooth_motion_and_sees_vibration():
+    """The vibration level of a block: a ramp of acceleration or a steady turn adds nothing
+    (second differences), white noise gives its variance, a kink does not decide (median)."""
+    t = np.arange(200) * 0.01
+    rng = np.random.default_rng(1)
+    w = np.column_stack([0.3 * t, 0.1 * np.ones_like(t), 0.05 * t**2])
+    f = np.column_stack([2.0 * t, np.ones_like(t), 9.8 + 0.0 * t])
+    f[100:, 0] += 1.0                                      # a step in the specific force
+    lv = calibrate.vibration_level(w, f)
+    assert lv[0] < 1e-9 and lv[1] < 1e-9
+    noisy = calibrate.vibration_level(w + rng.normal(0, 0.01, w.shape),
+                                      f + rng.normal(0, 0.1, f.shape))
+    assert noisy[0] == pytest.approx(1e-4, rel=0.3) and noisy[1] == pytest.approx(1e-2, rel=0.3)
+    assert calibrate.vibration_scale(noisy, (1e-4, 1e-3), 100.0) == pytest.approx((1.0, 10.0), rel=0.3)

@@ -46,25 +46,25 @@ def test_ekf_road_aid_returns_a_cross_track_constraint(helsinki):
     from types import SimpleNamespace
 
     from selfnav import attitude as att
+    from selfnav.ins.measurements import LevelRoad
 
     g = helsinki
     s = 100
     a = g.xy[g.seg_u[s]]
     lat, lon = g.to_geodetic(a[0] + 3.0, a[1])
     n = 30
-    gd = GnssData(np.arange(n, dtype=float), np.full(n, lat), np.full(n, lon), np.zeros(n),
-                  np.full(n, 3.0), None, None, "t")
     C = att.dcm_nb_from_euler(0.0, 0.0, g.seg_heading[s])
     ins = SimpleNamespace(lat=float(lat), lon=float(lon), h=0.0, velocity_n=np.zeros(3), C_nb=C)
-    grade = []
-    flt = SimpleNamespace(ins=ins, P=np.eye(15) * 25.0, nx=15,
-                          kalman=lambda r, H, R: grade.append((r, H, R)))
-    aid = EkfRoadAid(g, gd)
-    outs = [aid(t, flt) for t in np.arange(0.2, n, 0.2)]
-    got = [o for o in outs if o is not None]
+    flt = SimpleNamespace(ins=ins, P=np.eye(15) * 25.0, nx=15)
+    aid = EkfRoadAid(g)
+    for k in range(n):                  # the fixes as a receiver delivers them
+        aid.add_fix(float(k), float(lat), float(lon), 3.0)
+    outs = [aid.constraints(t, flt) for t in np.arange(0.2, n, 0.2)]
+    got = [m for ms in outs for m in ms if isinstance(m, dict)]
     assert got, "no constraint in 30 s of fixes at a standstill beside a road"
-    # the level-road prior reaches the filter's public kalman: H picks the up velocity
-    assert grade and grade[-1][1].shape == (1, 15) and grade[-1][1][0, 5] == 1.0
+    # the level-road prior: a measurement on the up velocity
+    levels = [m for ms in outs for m in ms if isinstance(m, LevelRoad)]
+    assert levels and levels[-1].sigma > 0
     out = got[-1]
     assert abs(np.linalg.norm(out["normal_n"]) - 1.0) < 1e-12
     assert abs(out["offset"]) < 10.0 and out["sigma"] > 0
@@ -77,11 +77,11 @@ def test_ekf_with_the_map_holds_the_centre_line():
     white 200 m window; the road aid takes the cross-track RMS well below a metre."""
     from selfnav.evaluation import evaluate
 
+    from selfnav import api
+
     sim, gd, g = _sim_drive("kotka_karhula", "industrial", 240.0, 60.0, mag=False)
-    cfg = ins.FilterConfig.for_grade("industrial")
-    plain = evaluate(sim.truth, ins.run_filter(sim.imu, gd, cfg).trajectory).metrics
-    aided = evaluate(sim.truth, ins.run_filter(sim.imu, gd, cfg,
-                                               road_aid=EkfRoadAid(g, gd)).trajectory).metrics
+    plain = evaluate(sim.truth, api.navigate(sim.imu, gd, grade="industrial").trajectory).metrics
+    aided = evaluate(sim.truth, api.navigate(sim.imu, gd, g, grade="industrial").trajectory).metrics
     assert aided["cross_track_rms_m"] < 1.0, aided["cross_track_rms_m"]
     assert aided["cross_track_rms_m"] < 0.5 * plain["cross_track_rms_m"]
     assert aided["along_track_rms_m"] < 1.5 * plain["along_track_rms_m"] + 1.0
@@ -92,7 +92,7 @@ def test_corner_arc_is_the_circle_tangent_to_both_legs(helsinki):
     corner cut R (1/cos(θ/2) − 1) at the polyline vertex, nothing far along a leg."""
     g = helsinki
     s, q = _corner(g)
-    aid = EkfRoadAid(g, _gnss_at(g, 0))
+    aid = EkfRoadAid(g)
     R = 9.0
     V = g.xy[g.seg_v[s]]
     th = float(wrap(g.seg_heading[q] - g.seg_heading[s]))
@@ -125,7 +125,7 @@ def test_cross_track_needs_the_line_not_the_position_along_it(helsinki):
     a = g.xy[g.seg_u[s]]
     d = np.array([np.sin(g.seg_heading[s]), np.cos(g.seg_heading[s])])
     nrm = np.array([d[1], -d[0]])
-    aid = EkfRoadAid(g, _gnss_at(g, 3), grade_sigma=None)
+    aid = EkfRoadAid(g, grade_sigma=None)
     pf = aid.pf
     pf.seg = np.full(400, s)
     pf.along = np.linspace(10.0, 110.0, 400)
@@ -135,10 +135,12 @@ def test_cross_track_needs_the_line_not_the_position_along_it(helsinki):
     lat, lon = g.to_geodetic(p[0], p[1])
     C = att.dcm_nb_from_euler(0.0, 0.0, g.seg_heading[s])
     ins = SimpleNamespace(lat=float(lat), lon=float(lon), h=0.0, velocity_n=np.zeros(3), C_nb=C)
-    flt = SimpleNamespace(ins=ins, P=np.eye(15) * 4.0)
+    flt = SimpleNamespace(ins=ins, P=np.eye(15) * 4.0, nx=15)
     aid.t_last = 0.0
-    out = aid(0.2, flt)
+    outs = aid.constraints(0.2, flt)
     assert pf.estimate()["share"] < 0.8
+    assert len(outs) == 1
+    out = outs[0]
     assert out is not None and abs(out["offset"] - 2.5) < 0.05
     assert abs(out["normal_n"] @ nrm - 1.0) < 1e-9
     assert out["sigma"] == 1.0 and abs(wrap(out["heading"] - g.seg_heading[s])) < 1e-12
@@ -151,14 +153,14 @@ def test_consumer_ekf_with_the_map_through_an_outlier_window():
     GNSS with a 90 s white 200 m window, health-checked start. Measured 3.3 m along / 0.49 m
     cross-track RMS (before the line-share test, corner arcs and the level-road prior:
     4.6 / 1.4 m)."""
+    from selfnav import api
     from selfnav.evaluation import evaluate
-    from selfnav.ins.align import robust_init
 
     sim, gd, g = _sim_drive("helsinki_centre", "consumer", 300.0, 90.0, mag=True)
-    aid = EkfRoadAid(g, gd)
-    res = ins.run_filter(sim.imu, gd, ins.FilterConfig.for_grade("consumer"),
-                         init=robust_init(sim.imu, gd), road_aid=aid)
-    m = evaluate(sim.truth, res.trajectory).metrics
+    nav = api.navigator(sim.imu, g, grade="consumer")
+    aid = nav.road_aid
+    ins.feed(nav, sim.imu, gd)
+    m = evaluate(sim.truth, nav.result().trajectory).metrics
     assert m["cross_track_rms_m"] < 0.8, m["cross_track_rms_m"]
     assert m["along_track_rms_m"] < 4.5, m["along_track_rms_m"]
     assert aid.counts["arc"] > 0 and aid.counts["leg"] > 0 and aid.counts["grade"] > 0
@@ -187,52 +189,6 @@ def test_corner_vertex_from_the_turn_geometry(helsinki):
     assert np.allclose(V + err - cand[k], err, atol=1e-6)
     assert len(corner_candidates(g, off, succ, V, h0, h0 + np.pi, 40.0)) == 0
 
-
-def _veto_setup(g, s, offset_across, n=12, scatter=3.0, seed=0):
-    """A filter on segment ``s`` (locked on it) and fixes ``offset_across`` m to its right."""
-    from types import SimpleNamespace
-
-    from selfnav import attitude as att
-
-    rng = np.random.default_rng(seed)
-    a = g.xy[g.seg_u[s]]
-    d = np.array([np.sin(g.seg_heading[s]), np.cos(g.seg_heading[s])])
-    nrm = np.array([d[1], -d[0]])
-    aid = EkfRoadAid(g, _gnss_at(g, 0), grade_sigma=None)
-    lat, lon = g.to_geodetic(*(a + 30.0 * d))
-    C = att.dcm_nb_from_euler(0.0, 0.0, g.seg_heading[s])
-    flt = SimpleNamespace(ins=SimpleNamespace(lat=float(lat), lon=float(lon), C_nb=C),
-                          P=np.diag([4.0, 4.0] + [1.0] * 13))
-    aid.lock = (0.0, nrm)
-    out = []
-    for k in range(n):
-        z = a + 30.0 * d + offset_across * nrm + rng.normal(size=2) * scatter
-        zl, zo = g.to_geodetic(*z)
-        out.append(aid.fix_veto(float(k), float(zl), float(zo), 10.0, flt))
-        aid.lock = (float(k), nrm)
-    return aid, out
-
-
-def test_map_vetoes_self_consistent_fixes_off_the_road(helsinki):
-    """Fixes 60 m beside the road the filter is locked on, consistent among themselves (a
-    drift): objected to from the fifth on, unless another road of that direction runs there;
-    white 200 m scatter (the filter's own gates handle it) and nominal fixes: no objection."""
-    g = helsinki
-    s = int(np.flatnonzero(g.seg_len > 120.0)[0])
-    d = np.array([np.sin(g.seg_heading[s]), np.cos(g.seg_heading[s])])
-    nrm = np.array([d[1], -d[0]])
-    a = g.xy[g.seg_u[s]]
-    for off in (60.0, -60.0, 90.0, -90.0, 120.0):
-        if not EkfRoadAid(g, _gnss_at(g, 0))._road_at(a + 30.0 * d + off * nrm,
-                                                       float(g.seg_heading[s]), 8.0):
-            break
-    aid, out = _veto_setup(g, s, off)
-    assert all(o is None for o in out[:4]) and all(o is not None for o in out[4:])
-    assert "across" in out[-1] and aid.counts["veto"] == len(out) - 4
-    _, out = _veto_setup(g, s, off, scatter=200.0)
-    assert all(o is None for o in out)
-    _, out = _veto_setup(g, s, 0.0, scatter=10.0)
-    assert all(o is None for o in out)
 
 
 @pytest.mark.slow

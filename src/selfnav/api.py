@@ -124,8 +124,6 @@ def navigate(imu: ImuData, gnss: GnssData | None, roads=None, *, method: str = "
     stats = {**res.stats, "smoothed": res.smoothed, "episodes": res.episodes,
              "imu_time_offset_format_s": fmt,
              "imu_time_offset_s": fmt + res.stats.get("imu_time_offset_s", 0.0)}
-    for why in res.stats.get("restarts", []):
-        warnings.warn(f"{why}: the navigator started again after it", SelfnavWarning, stacklevel=2)
     cols = {"sigma_h_m": res.sigma_h, "status": res.status,
             "protection_level_m": res.protection_level}
     return Solution(res.trajectory, res.sigma_enu, cols, stats,

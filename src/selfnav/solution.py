@@ -26,7 +26,7 @@ from selfnav.types import Trajectory
 
 #: per-row columns of a solution file besides the trajectory's, with their CSV formats
 EXTRA_FORMATS = {"sigma_e_m": "%.4f", "sigma_n_m": "%.4f", "sigma_u_m": "%.4f",
-                 "sigma_h_m": "%.4f", "cross_m": "%.3f"}
+                 "sigma_h_m": "%.4f", "protection_level_m": "%.3f", "cross_m": "%.3f"}
 
 #: what each column of a solution file holds, with its unit (written into the sidecar)
 COLUMN_DOCS = {
@@ -39,11 +39,17 @@ COLUMN_DOCS = {
     "sigma_e_m": "1σ of the position East, m", "sigma_n_m": "1σ of the position North, m",
     "sigma_u_m": "1σ of the position Up, m",
     "sigma_h_m": "horizontal 1σ, m (root sum of the East and North variances)",
-    "gnss": "status of the latest GNSS fix (within 2 s) at this row: used, used-h (height "
-            "rejected), used-v (height only), degraded (σ inflated), suspect, rejected, "
-            "before-init, none (no fix in the last 2 s)",
+    "status": "the navigator's state at this row (selfnav.ins.NavStatus): gnss (a fix fused "
+              "within the hold time), dead-reckoning (none fused: an outage or rejected "
+              "fixes), suspect (a fault episode is open: fixes and INS disagree)",
+    "protection_level_m": "horizontal protection level at the configured integrity risk "
+                          "(1e-5 by default), m",
+    "gnss": "status of the latest GNSS fix (files of selfnav 0.2)",
     "cross_m": "distance from the fix to its matched road position, m",
-    "way_id": "OpenStreetMap way matched", "matched": "1 if a road lies within the search radius",
+    "way_id": "OpenStreetMap way matched",
+    "matched": "1 where the match is plausible (match_p >= 0.7, near its road, not a lone fix)",
+    "match_p": "posterior probability that the matched point is on the driven road",
+    "piece": "index of the track's piece (the matcher broke and restarted between pieces)",
     "sigma_lat_deg": "1σ of the latitude, deg", "sigma_lon_deg": "1σ of the longitude, deg",
 }
 

@@ -503,13 +503,13 @@ def init_from_gnss(imu, gnss: GnssData, cfg: FilterConfig, sig_h):
     n = len(gnss.t)
     dtf = float(np.median(np.diff(gnss.t))) if n > 1 else 1.0
     s_med = float(np.median(sig_h))
-    W = int(np.clip(np.ceil((12.0 * s_med**2 / (0.25 * dtf**2)) ** (1.0 / 3.0)), max(cfg.outliers.window, 3), 20))
+    W = int(np.clip(np.ceil((12.0 * s_med**2 / (0.25 * dtf**2)) ** (1.0 / 3.0)), max(cfg.init.window, 3), 20))
     lat0, lon0 = gnss.lat[0], gnss.lon[0]
     rm, rn = radii(lat0, 0.0)
     p = np.column_stack([(gnss.lon - lon0) * rn * np.cos(lat0), (gnss.lat - lat0) * rm, gnss.h])
     for k in range(n - W + 1):
         sl = slice(k, k + W)
-        if cfg.outliers.robust and not _consistent_run(p[sl, :2], gnss.t[sl], sig_h[sl], cfg):
+        if not _consistent_run(p[sl, :2], gnss.t[sl], sig_h[sl], cfg):
             continue
         # a straight-line fit gives the *mean* velocity: exact at the centre of the window for a
         # constant acceleration, so the filter starts at the centre time
@@ -620,7 +620,7 @@ def robust_init(imu, gnss, graph=None, *, sigma=10.0, window=20, cfg: FilterConf
     (seed (15) at the start). ``require_healthy``: no start without a healthy run (the
     causal start-up waits for one)."""
     fc = cfg if cfg is not None else FilterConfig.for_grade("consumer")
-    fc = fc.updated(window=max(fc.outliers.window, 15))
+    fc = fc.updated(window=max(fc.init.window, 15))
     sig = (np.asarray(gnss.sigma_m, float) if gnss.sigma_m is not None
            else np.full(len(gnss.t), np.nan))
     sig = np.where(np.isfinite(sig), sig, sigma)

@@ -138,13 +138,19 @@ def _gnss_stopped(gnss: GnssData, t0, t1) -> bool:
 
 
 def vibration_level(w, f):
-    """The vibration an IMU block carries: the mean over axes of the sample-to-sample
-    variance ``var(Δx)/2`` of the rates and of the specific force (smooth motion hardly moves
-    it; engine and road vibration do)."""
-    if len(w) < 4:
+    """The vibration an IMU block carries: per axis the variance of the high-frequency part,
+    from the second differences ``x_{k+1} − 2 x_k + x_{k−1}`` (6σ² for white noise; smooth
+    motion, even a ramp of acceleration, leaves none) as a median (a kink where the motion
+    changes does not decide), the mean over axes, for the rates and the specific force."""
+    if len(w) < 5:
         return None
-    return (float(np.mean(np.var(np.diff(w, axis=0), axis=0))) / 2.0,
-            float(np.mean(np.var(np.diff(f, axis=0), axis=0))) / 2.0)
+
+    def level(x):
+        d2 = x[2:] - 2.0 * x[1:-1] + x[:-2]
+        s = np.median(np.abs(d2), axis=0) / (0.6744897501960817 * np.sqrt(6.0))
+        return float(np.mean(s * s))
+
+    return level(np.asarray(w)), level(np.asarray(f))
 
 
 def vibration_scale(level, reference, cap: float):
@@ -424,6 +430,7 @@ class NoiseAdapter:
         self.alpha = 1.0 / cfg.memory
         self.fix_ratio = 1.0     # running mean of NIS/dof of trusted fixes
         self.ref_ratio = 1.0     # running mean of χ²/dof of trusted fixes against references
+        self.ref_lambda = 1.0    # running mean of λ over the same memory (what they predicted with)
         self._t_ref = None
         self.ref_samples = 0
         self.updates = 0
@@ -434,22 +441,26 @@ class NoiseAdapter:
         return max(self.ref_ratio, 1.0)
 
     def on_fix(self, flt, nis_value, dof):
-        """A trusted fix with normalised innovation ``nis_value`` of ``dof`` dimensions."""
+        """A trusted fix with normalised innovation ``nis_value`` of ``dof`` dimensions: ``λ``
+        moves towards what both witnesses ask for — the references' ratio times the ``λ`` they
+        were propagated with (a fixed point: once the references are honest, κ̂ = 1 and the
+        target is the ``λ`` that made them so), the fix ratio over its trigger — at most
+        ``up_step`` per fix, never below 1."""
         c = self.cfg
         x = min(nis_value / dof, c.clip)
         self.fix_ratio += self.alpha * (x - self.fix_ratio)
-        target = max(1.0, self.fix_ratio / c.trigger if self.fix_ratio > c.trigger else 1.0,
-                     flt.q_scale * self.ref_ratio if self.ref_samples else 1.0)
+        target = max(1.0, self.fix_ratio / c.trigger,
+                     self.ref_lambda * self.ref_ratio if self.ref_samples else 1.0)
         k = min(max(target / flt.q_scale, c.decay), c.up_step)
         new = min(max(flt.q_scale * k, 1.0), c.hi)
         if new != flt.q_scale:
             flt.q_scale = new
             self.updates += 1
 
-    def on_reference(self, t, chi2_value, age):
-        """A trusted fix at time ``t`` against a mature reference of ``age`` s (2 dof): the
-        references up to ``reference_age_s`` old feed κ̂ with a memory of
-        ``reference_memory_s`` seconds."""
+    def on_reference(self, t, chi2_value, age, q_scale=1.0):
+        """A trusted fix at time ``t`` against a mature reference of ``age`` s (2 dof) that was
+        propagated with noise scale ``q_scale``: the references up to ``reference_age_s`` old
+        feed κ̂ with a memory of ``reference_memory_s`` seconds."""
         c = self.cfg
         if age > c.reference_age_s:
             return
@@ -457,6 +468,7 @@ class NoiseAdapter:
         self._t_ref = t
         a = 1.0 - math.exp(-max(dt, 1e-3) / c.reference_memory_s)
         self.ref_ratio += a * (min(chi2_value / 2.0, c.clip) - self.ref_ratio)
+        self.ref_lambda += a * (q_scale - self.ref_lambda)
         self.ref_samples += 1
 
 

@@ -9,8 +9,8 @@ named, documented field:
 ``init``            :class:`Initialisation` — the initial σ and the in-motion alignment
 ``gnss``            :class:`GnssAiding` — lever arm, σ floor, GNSS velocity
 ``vehicle``         :class:`VehicleConstraints` — non-holonomic constraint and zero-velocity updates
-``outliers``        :class:`OutlierDefence` — χ² gate, window test, suspect mode
-``shadows``         :class:`ShadowGuard` — shadow dead reckoning against drifting GNSS
+``integrity``       :class:`Integrity` — the fault-hypothesis bank: gates, references, runs
+``adaptation``      :class:`NoiseAdaptation` — the online noise scale and vibration factor
 ==================  ===========================================================================
 
 The noise of a grade is *derived* from the one sensor vocabulary of :mod:`selfnav.sensors`
@@ -31,10 +31,7 @@ from selfnav import sensors
 from selfnav.errors import SelfnavError
 from selfnav.units import DEG
 
-CHI2_3_999 = 16.266
 CHI2_2_999 = 13.816
-CHI2_1_999 = 10.828
-CHI2_2_9999 = 18.421
 
 
 @functools.lru_cache(maxsize=128)
@@ -182,6 +179,8 @@ class Initialisation:
     att_sigma : roll, pitch, heading σ, rad
     min_speed : the GNSS course gives the heading above this speed, m/s
     max_accel : bounded-acceleration motion model of the start-up consistency test, m/s²
+    window : fewest fixes in the in-motion alignment's window
+    healthy_window : fixes in the run that must look healthy before the start
     given_pos_sigma, given_vel_sigma, given_att_sigma : σ of a state given by another
         navigator or a survey (``--init``): m, m/s, (roll, pitch, heading) rad
     """
@@ -191,6 +190,8 @@ class Initialisation:
     att_sigma: tuple = (2.0 * DEG, 2.0 * DEG, 10.0 * DEG)
     min_speed: float = 5.0
     max_accel: float = 5.0
+    window: int = 6
+    healthy_window: int = 20
     given_pos_sigma: float = 1.0
     given_vel_sigma: float = 0.1
     given_att_sigma: tuple = (1.0 * DEG, 1.0 * DEG, 3.0 * DEG)
@@ -271,82 +272,6 @@ class VehicleConstraints:
 
 
 @dataclass
-class OutlierDefence:
-    """The defence against GNSS outliers nothing flags (DESIGN §7; :mod:`selfnav.ins.guard`).
-
-    Attributes
-    ----------
-    robust : the window test, suspect mode and re-acquisition (False: only the χ² gate)
-    gate : χ² gate on each fix (3 dof, 0.999)
-    soft_gate : with ``robust``, fixes up to ``soft_gate × gate`` are used with R inflated …
-    soft_gate_max_m : … when the horizontal innovation is below this, m …
-    soft_gate_sigmas : … or below this many of the fix's σ
-    window : fixes in the consistency window
-    window_vel_floor : velocity σ added to the filter's when the window test allows for INS
-        drift between fixes, m/s
-    suspect_after : consecutive rejections before suspect mode
-    degraded_window : s of suspect fixes judged for white noise (degraded mode)
-    degraded_min : at least this many fixes
-    degraded_min_ratio : a white-noise scale is used only above this many fix σ
-    white_rho_max : lag-1 autocorrelation above which suspect fixes are not white
-    white_ratio_min : the fix-to-fix scale must be at least this share of the scale about the
-        median (equal for white noise, far smaller for a drift)
-    reinit_after : s of fixes that fit one smooth track by themselves but not the INS
-        displacement (the INS, not the fixes, is lost) before the INS is re-initialised
-        from them
-    reinit_span : s of fixes the re-initialisation fits
-    """
-
-    robust: bool = True
-    gate: float = CHI2_3_999
-    soft_gate: float = 10.0
-    soft_gate_max_m: float = 3.0
-    soft_gate_sigmas: float = 3.0
-    window: int = 6
-    window_vel_floor: float = 0.2
-    suspect_after: int = 2
-    degraded_window: float = 20.0
-    degraded_min: int = 15
-    degraded_min_ratio: float = 3.0
-    white_rho_max: float = 0.3
-    white_ratio_min: float = 0.8
-    reinit_after: float = 20.0
-    reinit_span: float = 10.0
-
-
-@dataclass
-class ShadowGuard:
-    """Shadow dead reckoning against smoothly drifting GNSS (:class:`selfnav.ins.guard.DeadReckoningGuard`).
-
-    Attributes
-    ----------
-    use_shadows : keep shadows (with ``outliers.robust``)
-    branch_every : s between shadows
-    max_age : s a shadow lives while GNSS is trusted
-    min_age : s before a shadow tests fixes
-    step : s between shadow updates
-    branch_att_sigma : branch only when every attitude σ is below this, rad
-    sigma_scale : shadow σ inflation (EKF dead reckoning is optimistic)
-    shadow_gate : χ² (2 dof, 0.9999) of a fix against a shadow
-    fit_sigma : m/s: re-acquire after a run this sure of its speed
-    max_suspect : s after which any consistent run re-acquires
-    reacq_run : s of fixes moving like the dead reckoning that re-acquire outside its σ
-    """
-
-    use_shadows: bool = True
-    branch_every: float = 30.0
-    max_age: float = 90.0
-    min_age: float = 5.0
-    step: float = 1.0
-    branch_att_sigma: float = 0.5 * DEG
-    sigma_scale: float = 2.0
-    shadow_gate: float = CHI2_2_9999
-    fit_sigma: float = 0.5
-    max_suspect: float = 330.0
-    reacq_run: float = 20.0
-
-
-@dataclass
 class NoiseAdaptation:
     """The online process-noise scale ``λ`` (:class:`selfnav.ins.calibrate.NoiseAdapter`):
     policy choices of an estimator.
@@ -387,6 +312,8 @@ class Integrity:
 
     Attributes
     ----------
+    bank : the fault-hypothesis bank (False: the plain χ² gate of each fix alone, the baseline
+        most fusion stacks run)
     p_false_alarm : probability that a consistent fix (or run) fails a gate; every χ² gate
         of a single fix is the quantile of this probability
     false_alarms_per_hour : expected false fault detections (a reset to dead reckoning) per
@@ -400,12 +327,18 @@ class Integrity:
         dead reckoning's linearised σ stops covering it: on drive_0708 4-minute branches
         were 350 m off at a 65 m σ)
     min_age_s : s before a reference judges fixes
+    reference_safety : the references' tests (and the innovation sums) take their χ² over
+        this factor: an envelope must err on the safe side — a false alarm throws away a
+        good solution for a dead reckoning (2: an envelope √2 wider than the covariance;
+        consumer references 100 s old reached χ² 26 on clean simulated drives)
     reference_step_s : s between reference propagation steps (cost; the NHC then weighs as
         much per second as the filter's updates with their correlated errors)
     rejections_to_open : consecutive rejected fixes that open an episode
     run_s : s a run of fixes must span before it may end an episode
     run_min_fixes : fixes a run needs at least
     run_max_s : s of the most recent fixes a run keeps
+    recovery_odds : the likelihood ratio by which healthy fixes must beat the fault's
+        extrapolation to end an episode
     innovation_windows : numbers of recent fixes whose whitened innovations must sum to
         about zero (a drag passes each fix's gate but pulls every one the same way)
     velocity_span_s : s of a run's last fixes whose own velocity is given to the navigator
@@ -418,19 +351,22 @@ class Integrity:
     separation_floor_m : smallest σ of a separation between two solutions (numerics), m
     """
 
+    bank: bool = True
     p_false_alarm: float = 1e-4
     false_alarms_per_hour: float = 0.1
     integrity_risk: float = 1e-5
     branch_every_s: float = 10.0
-    branch_after_s: float = 10.0
+    branch_after_s: float = 30.0
     max_age_s: float = 160.0
     min_age_s: float = 2.0
+    reference_safety: float = 2.0
     reference_step_s: float = 1.0
     rejections_to_open: int = 2
     run_s: float = 5.0
     run_min_fixes: int = 5
     run_max_s: float = 30.0
     onset_s: float = 3.0
+    recovery_odds: float = 100.0
     innovation_windows: tuple = (4, 8, 16, 32)
     velocity_span_s: float = 2.0
     reinit_after_s: float = 20.0
@@ -439,8 +375,7 @@ class Integrity:
 
 
 GROUPS = {"imu": ImuNoise, "states": StateOptions, "init": Initialisation, "gnss": GnssAiding,
-          "vehicle": VehicleConstraints, "outliers": OutlierDefence, "shadows": ShadowGuard, "integrity": Integrity,
-          "adaptation": NoiseAdaptation}
+          "vehicle": VehicleConstraints, "integrity": Integrity, "adaptation": NoiseAdaptation}
 
 
 def _field_index():
@@ -478,8 +413,6 @@ class FilterConfig:
     init: Initialisation = field(default_factory=Initialisation)
     gnss: GnssAiding = field(default_factory=GnssAiding)
     vehicle: VehicleConstraints = field(default_factory=VehicleConstraints)
-    outliers: OutlierDefence = field(default_factory=OutlierDefence)
-    shadows: ShadowGuard = field(default_factory=ShadowGuard)
     integrity: Integrity = field(default_factory=Integrity)
     adaptation: NoiseAdaptation = field(default_factory=NoiseAdaptation)
     cov_step: float = 0.2          # covariance propagation sub-step, s

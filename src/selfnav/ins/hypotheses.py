@@ -174,6 +174,8 @@ class FaultBank:
         """Branch a new reference from ``M`` every ``branch_every_s`` while the GNSS is healthy;
         keep the oldest reference of each age octave, none older than ``max_age_s``."""
         ig = self.cfg.integrity
+        if not ig.bank:
+            return
         if self.episode is None and self.t_healthy is not None \
                 and t - self.t_healthy >= ig.branch_after_s - 1e-9 \
                 and t - self._t_branch >= ig.branch_every_s - 1e-9:
@@ -211,6 +213,11 @@ class FaultBank:
         self._end_outage(t)
         S = m_pos.H @ P @ m_pos.H.T + m_pos.R
         nis = float(m_pos.r @ np.linalg.solve(S, m_pos.r))
+        if not self.cfg.integrity.bank:
+            # the plain χ² gate of each fix alone (no references, no episodes): the baseline
+            ok = nis <= self.gate
+            return Verdict(FixStatus.USED if ok else FixStatus.REJECTED,
+                           "" if ok else f"χ² gate (NIS {nis:.3g})", nis, apply=ok)
         if self.episode is not None:
             return self._judge_episode(flt, m_pos, t, nis)
         if nis > self.gate:
@@ -224,11 +231,25 @@ class FaultBank:
         wv = np.linalg.solve(np.linalg.cholesky(S), m_pos.r)
         self.innov.append(wv)
         self.innov = self.innov[-self.cfg.integrity.innovation_windows[-1]:]
-        drift = self._innovation_drift()
+        # (not while the filter is still settling: its innovations have a trend then)
+        settled = self.t_healthy is not None and \
+            t - self.t_healthy >= self.cfg.integrity.branch_after_s
+        drift = self._innovation_drift() if settled else None
         if drift is not None:
+            why, n = drift
+            # the fault began within the window: back to the youngest reference before it
+            t_from = t - n * self.fix_dt
+            self.flush()
+            before = [r for r in self.mature(t) if r.t0 <= t_from]
+            if before:
+                ref = before[-1]
+                self._open(ref.t0, reset=True)
+                self.refs = [r for r in self.refs if r.t0 <= ref.t0]
+                return Verdict(FixStatus.REJECTED, f"{why} since {ref.t0:.1f} s", nis,
+                               reset_to=ref.flt, excluded_since=ref.t0)
             self._open(t, reset=False)
             self.episode.kind = "drag"
-            return Verdict(FixStatus.REJECTED, drift, nis)
+            return Verdict(FixStatus.REJECTED, why, nis)
         self.flush()
         # the envelope: a fix outside a reference's is not accepted; and the separation M
         # would have from each reference after taking it
@@ -238,11 +259,12 @@ class FaultBank:
         alarms, tested = [], []
         mature = self.mature(t)
         gate = self.reference_gate(len(mature))
-        kappa = 1.0 if self.adapter is None else self.adapter.reference_ratio
+        kappa = self.cfg.integrity.reference_safety * (
+            1.0 if self.adapter is None else self.adapter.reference_ratio)
         for ref in mature:
             q_fix, q_sep, sep = self._against(ref, flt, m_pos, dx, P_plus_hh)
             q_fix, q_sep = q_fix / kappa, q_sep / kappa
-            tested.append((q_fix * kappa, t - ref.t0))
+            tested.append((q_fix * kappa, t - ref.t0, ref.flt.q_scale))
             if self.diag is not None:
                 self.diag.append((t, t - ref.t0, q_fix, q_sep, sep, kappa))
             self._sep_max = max(self._sep_max, sep)
@@ -262,22 +284,22 @@ class FaultBank:
         if self.used_streak == 1:
             self.t_healthy = t
         if self.adapter is not None:
-            for q, age in tested:
-                self.adapter.on_reference(t, q, age)
+            for q, age, lam in tested:
+                self.adapter.on_reference(t, q, age, lam)
         return Verdict(FixStatus.USED, "", nis, apply=True)
 
     def _innovation_drift(self):
-        """The reason if the recent whitened innovations have a mean: ``|Σ ν|² / n`` above
-        the gate of the references' false-alarm rate for a window of the last ``n`` fixes."""
+        """``(reason, n)`` if the recent whitened innovations have a mean: ``|Σ ν|² / n``
+        above the gate of the references' false-alarm rate for the last ``n`` fixes."""
         wins = self.cfg.integrity.innovation_windows
         gate = self.reference_gate(len(wins) / 2.0)
         for n in wins:
             if len(self.innov) < n:
                 break
             q = float(np.sum(np.sum(self.innov[-n:], axis=0) ** 2)) / n
-            if q > gate:
+            if q > gate * self.cfg.integrity.reference_safety:
                 return (f"the last {n} fixes pull the same way (their innovations sum to "
-                        f"χ² {q:.3g}): a drag")
+                        f"χ² {q:.3g}): a drag"), n
         return None
 
     def reference_gate(self, n_refs: float) -> float:
@@ -337,7 +359,7 @@ class FaultBank:
                                f"{test['why']}, but outside the dead reckoning since "
                                f"{out[0]:.1f} s (χ² {out[1]:.3g})", nis)
         if test["white"] and test["moves"]:
-            still, add = self._fault_continues(ep, flt, test, t)
+            still, add = self._fault_continues(ep, flt, test, t, span)
             if add is not None and in_gate:
                 # the fault and health cannot be told apart: the fix is fused with the fault's
                 # possible offset in its σ (no better than the dead reckoning, and as honest)
@@ -398,11 +420,11 @@ class FaultBank:
         if chi <= chi2_gate(2 * (len(tt) - 2), self.cfg.integrity.p_false_alarm) * 4.0:
             ep.fault = {"t": tc, "coef": coef, "cov": np.linalg.inv(N) * scale}
 
-    def _fault_continues(self, ep, flt, test, t):
+    def _fault_continues(self, ep, flt, test, t, span=0.0):
         """Is a run better explained by the smooth fault going on than by healthy fixes?
         Its offset now against the fault's line extrapolated (H1) and against zero — the
         dead reckoning's own error, σ from ``M`` (H0); the run stays suspect unless H0 wins
-        by the likelihood ratio of the gate, or the fault would by now sit within one σ of
+        by ``recovery_odds``, or the fault would by now sit within one σ of
         the dead reckoning (then the two cannot be told apart, and taking the fixes costs no
         more than the dead reckoning's own error). Returns the reason, or None."""
         f = ep.fault
@@ -418,13 +440,17 @@ class FaultBank:
         q1 = float((o - pred) @ np.linalg.solve(S1, o - pred))
         q0 = float(o @ np.linalg.solve(S0, o))
         llr = 0.5 * (q0 - q1) - 0.5 * np.log(np.linalg.det(S1) / np.linalg.det(S0))
-        if llr < -0.5 * self.gate:
+        if llr < -np.log(self.cfg.integrity.recovery_odds):
             return None, None
         why = (f"its offset {np.hypot(*o):.1f} m against the fault's {np.hypot(*pred):.1f} m "
                f"(log-likelihood ratio {llr:+.1f})")
         if float(pred @ np.linalg.solve(flt.P[:2, :2], pred)) <= 1.0:
             return (f"the fault would be within the dead reckoning's σ ({why})",
                     np.outer(pred, pred) + C_f)
+        if span >= self.cfg.integrity.reinit_after_s:
+            # a fix inside the envelope is never refused for long: fused with the fault's
+            # possible offset in its σ (the fault model may be the dead reckoning's own drift)
+            return (f"within the envelope for {span:.0f} s ({why})", np.outer(pred, pred) + C_f)
         return why, None
 
     def _outside_references(self, flt, m_pos, t):
@@ -433,7 +459,8 @@ class FaultBank:
         self.flush()
         mature = self.mature(t)
         gate = self.reference_gate(len(mature))
-        kappa = 1.0 if self.adapter is None else self.adapter.reference_ratio
+        kappa = self.cfg.integrity.reference_safety * (
+            1.0 if self.adapter is None else self.adapter.reference_ratio)
         zero = np.zeros(flt.nx)
         P_hh = flt.P[:2, :2]
         for ref in reversed(mature):

@@ -130,6 +130,8 @@ class NavigatorResult:
     episodes: list
     stats: dict
     smoothed: bool = False
+    gyro_bias: np.ndarray | None = None    # (N, 3) rad/s, the estimate at each row
+    accel_bias: np.ndarray | None = None   # (N, 3) m/s²
 
     @property
     def sigma_h(self) -> np.ndarray:
@@ -147,6 +149,31 @@ def _still(w_blk, f_blk, C_nb, veh):
     return (np.max(np.linalg.norm(w_blk, axis=1)) < veh.zupt_gyro
             and np.std(np.linalg.norm(f_blk, axis=1)) < veh.zupt_accel
             and np.hypot(f_n[0], f_n[1]) < veh.zupt_accel_h)
+
+
+def initial_filter(cfg: FilterConfig, init: dict, time_offset_applied: float = 0.0):
+    """The error-state filter of a start ``init`` (true time ``t``, ``lat, lon, h, velocity_n,
+    C_nb``; optionally ``sigmas`` (position, velocity, attitude σ triples), ``gyro_bias`` and
+    its σ, ``tilt_bias_map``: levelled on biased accelerometers, tilt and horizontal bias are
+    one error, :func:`selfnav.ins.align.levelling_map`)."""
+    flt = InsGnssFilter(cfg, float(init["t"]) - time_offset_applied, init["lat"], init["lon"],
+                        init["h"], init["velocity_n"], init["C_nb"],
+                        time_offset_applied=time_offset_applied)
+    if "sigmas" in init:
+        sp, sv, sa = init["sigmas"]
+        flt.P[IR, IR] = np.diag(np.square(sp))
+        flt.P[IV, IV] = np.diag(np.square(sv))
+        flt.P[IP, IP] = np.diag(np.square(sa))
+    if "tilt_bias_map" in init:
+        A = np.asarray(init["tilt_bias_map"], dtype=float)
+        Pb = flt.P[IBA, IBA].copy()
+        flt.P[IP, IP] += A @ Pb @ A.T
+        flt.P[IP, IBA] = A @ Pb
+        flt.P[IBA, IP] = (A @ Pb).T
+    if "gyro_bias" in init:
+        flt.bg = np.array(init["gyro_bias"], dtype=float)
+        flt.P[IBG, IBG] = np.diag(np.square(init["gyro_bias_sigma"]))
+    return flt
 
 
 class Navigator:
@@ -231,6 +258,9 @@ class Navigator:
         self._debug = False
         self._cfg0 = config
         self._episodes_done = []
+        self._segments = []
+        self._last_flt = None
+        self._odo_warned = False
         self._dt_nominal = None
         self.restarts = []
 
@@ -250,18 +280,18 @@ class Navigator:
         dt = np.diff(np.concatenate([[t[0] - first if prev is None else prev], t]))
         if np.any(dt <= 0):
             raise SelfnavError(f"IMU samples must have increasing times (at {t[np.argmin(dt)]:.6f} s)")
-        self._t_prev_stamp = float(t[-1])
-        self._decisions = []
         # a gap the INS cannot bridge: start again after it (no row stands inside a gap)
         nominal = self._dt_nominal if self._dt_nominal else float(np.median(dt))
         gap = np.flatnonzero(dt > self.cfg.vehicle.max_imu_gap_samples * nominal)
-        if prev is not None and len(gap):
+        if len(gap) and (prev is not None or gap[0] > 0):
             g = int(gap[0])
             if g:
                 self.add_imu(t[:g], w[:g], f[:g])
             self._restart(f"IMU gap of {dt[g]:.3f} s before {t[g]:.3f} s")
             self._t_prev_stamp = float(t[g]) - nominal
             return self.add_imu(t[g:], w[g:], f[g:])
+        self._t_prev_stamp = float(t[-1])
+        self._decisions = []
         self._dt_nominal = nominal if self._dt_nominal else float(np.median(dt)) if len(dt) > 2 \
             else None
         self._dt_prev = float(dt[-1])
@@ -269,6 +299,14 @@ class Navigator:
         while self.flt is None and i < len(t):
             # start attempts at a fixed grid of true time: the same whatever the chunking
             st = self.startup
+            if self._given_init is not None:
+                # a given start: at the first sample at or after its time
+                t0 = float(self._given_init["t"]) - self.offset_applied
+                j = max(i + 1, min(len(t), i + int(np.searchsorted(t[i:], t0 - 1e-12))))
+                st.add_imu(t[i:j], w[i:j], f[i:j])
+                i = j
+                self._maybe_start()
+                continue
             grid = st.next_attempt(t[i] + self.offset_applied)
             j = i + int(np.searchsorted(t[i:] + self.offset_applied, grid - 1e-12, side="left")) + 1
             j = min(j, len(t))
@@ -364,6 +402,15 @@ class Navigator:
 
     def _push_odometer(self, t, speed, sigma):
         if self.flt.layout.odo is None:
+            if not self._odo_warned:
+                import warnings
+
+                from selfnav.errors import SelfnavWarning
+
+                warnings.warn("wheel speed arrived after the start: the navigator has no "
+                              "odometer state (give the first samples before the start, or "
+                              "odometer=True)", SelfnavWarning, stacklevel=3)
+                self._odo_warned = True
             return
         last = getattr(self, "_t_odo", -np.inf)
         if t - last < self.cfg.vehicle.odometer_step - 1e-9:
@@ -395,6 +442,11 @@ class Navigator:
         if self.flt is not None:
             self.finish()
             self.restarts.append(why)
+            self._segments.append((self._rec, self.flt.layout))
+            self._rec = {k: [] for k in self._rec}
+            self._last_flt = self.flt
+            self._episodes_done += self.bank.episodes
+            self.bank = None
         self.flt = None
         self.cfg = self._cfg0
         self.startup = StartUp(self.cfg, time_offset_applied=self.offset_applied,
@@ -418,24 +470,7 @@ class Navigator:
         self.start_info = {"t": float(init["t"]), "measured": start.measured,
                            "notes": list(start.notes), "attempts": st.attempts}
         t0_stamp = float(init["t"]) - self.offset_applied
-        flt = InsGnssFilter(cfg, t0_stamp, init["lat"], init["lon"], init["h"],
-                            init["velocity_n"], init["C_nb"],
-                            time_offset_applied=self.offset_applied)
-        if "sigmas" in init:
-            sp, sv, sa = init["sigmas"]
-            flt.P[IR, IR] = np.diag(np.square(sp))
-            flt.P[IV, IV] = np.diag(np.square(sv))
-            flt.P[IP, IP] = np.diag(np.square(sa))
-        if "tilt_bias_map" in init:
-            # levelled on biased accelerometers: tilt and horizontal bias are one error
-            A = np.asarray(init["tilt_bias_map"], dtype=float)
-            Pb = flt.P[IBA, IBA].copy()
-            flt.P[IP, IP] += A @ Pb @ A.T
-            flt.P[IP, IBA] = A @ Pb
-            flt.P[IBA, IP] = (A @ Pb).T
-        if "gyro_bias" in init:
-            flt.bg = np.array(init["gyro_bias"], dtype=float)
-            flt.P[IBG, IBG] = np.diag(np.square(init["gyro_bias_sigma"]))
+        flt = initial_filter(cfg, init, self.offset_applied)
         flt.track_transition = self.smoother
         flt.q_scale = cfg.adaptation.q_scale0
         self.flt = flt
@@ -791,7 +826,8 @@ class Navigator:
         P = flt.P
         self._rows.append((T, dt_row, st, np.sqrt(np.maximum(np.diag(P)[:9], 0.0)),
                            _STATUS_CODE[self._status(T)], self.bank.protection_level(flt, T),
-                           len(self._rec["t"]) - 1 if self.smoother else -1))
+                           len(self._rec["t"]) - 1 if self.smoother else -1,
+                           len(self._segments), flt.layout.lever is not None))
 
     def _record_epoch(self):
         if not self.smoother:
@@ -847,12 +883,17 @@ class Navigator:
         while self._next_row is not None and self._next_row <= t + 1e-9:
             self._emit_row(self._next_row)
             self._next_row = self._row_after(self._next_row)
+        for te, kind, _, payload in self._events:
+            if kind == _KIND_FIX:
+                self.log["reason"][payload.index] = "after the last IMU sample"
         self.bank.finish(t)
 
     def result(self, smooth: bool = False) -> NavigatorResult:
         """The rows as a :class:`NavigatorResult`; ``smooth``: RTS-smoothed (needs
-        ``smoother=True``; uses the whole record — post-processing, not real time)."""
-        if self.flt is None:
+        ``smoother=True``; uses the whole record — post-processing, not real time). Each
+        stretch between IMU gaps is smoothed on its own."""
+        last = self.flt or self._last_flt
+        if last is None:
             why = self.startup.last_error if self.startup is not None else "no data"
             raise SelfnavError(f"the navigator never started: {why}")
         if smooth and not self.smoother:
@@ -866,43 +907,46 @@ class Navigator:
         code = np.array([r[4] for r in rows], int)
         pl = np.array([r[5] for r in rows])
         ep_idx = np.array([r[6] for r in rows], int)
+        seg = np.array([r[7] for r in rows], int)
+        lever = np.array([r[8] for r in rows], bool)
         smoothed = False
-        if smooth and n and len(self._rec["t"]) > 2:
-            rec = self._rec
-            _, Ps, eps = rts_smooth(np.asarray(rec["state"]), np.asarray(rec["P"]),
-                                    np.asarray(rec["Pm"]), np.asarray(rec["Phi"]),
-                                    np.asarray(rec["dx"]), self.flt.layout,
-                                    np.asarray(rec["brk"], bool), return_errors=True)
-            lay = self.flt.layout
-            t_rec = np.asarray(rec["t"])
-            for i in range(n):
-                k = ep_idx[i]
-                if k < 0:
+        segments = self._segments + ([(self._rec, self.flt.layout)] if self.flt is not None
+                                     else [])
+        if smooth and n:
+            for s_id, (rec, lay) in enumerate(segments):
+                if len(rec["t"]) <= 2:
                     continue
-                e = eps[k].copy()
-                e[IR] += e[IV] * (T[i] - dtr[i] - t_rec[k])
-                st[i] = apply_error(st[i], e, lay)
-                sig[i] = np.sqrt(np.maximum(np.diag(Ps[k])[:9], 0.0))
+                _, Ps, eps = rts_smooth(np.asarray(rec["state"]), np.asarray(rec["P"]),
+                                        np.asarray(rec["Pm"]), np.asarray(rec["Phi"]),
+                                        np.asarray(rec["dx"]), lay,
+                                        np.asarray(rec["brk"], bool), return_errors=True)
+                t_rec = np.asarray(rec["t"])
+                for i in np.flatnonzero((seg == s_id) & (ep_idx >= 0)):
+                    k = ep_idx[i]
+                    e = eps[k].copy()
+                    e[IR] += e[IV] * (T[i] - dtr[i] - t_rec[k])
+                    st[i] = apply_error(st[i], e, lay)
+                    sig[i] = np.sqrt(np.maximum(np.diag(Ps[k])[:9], 0.0))
             smoothed = True
         # the row time: first order from the sample's state (under one IMU sample)
         vel = st[:, PACK["vel"]]
         C = st[:, PACK["C"]].reshape(n, 3, 3)
         d = vel * dtr[:, None]
-        if self.flt.layout.lever is not None:
-            d = d + np.einsum("nji,nj->ni", C, st[:, PACK["lever"]])
+        d[lever] += np.einsum("nji,nj->ni", C[lever], st[lever][:, PACK["lever"]])
         lat, lon, h = offset_to_geodetic(st[:, 0], st[:, 1], st[:, 2], d) if n else (
             st[:, 0], st[:, 1], st[:, 2])
         traj = Trajectory(T, np.asarray(lat), np.asarray(lon), np.asarray(h), vel, C,
-                          "selfnav navigator" + (" (antenna)" if self.flt.layout.lever
+                          "selfnav navigator" + (" (antenna)" if last.layout.lever
                                                  is not None else ""))
         names = list(NavStatus)
         status = np.array([str(names[c]) for c in code], dtype=object)
         log = {k: np.asarray(v, dtype=object if k in ("status", "reason") else None)
                for k, v in self.log.items()}
         log["status"] = np.array([str(FixStatus(s)) for s in self.log["status"]], dtype=object)
+        bank_eps = self.bank.episodes if self.bank is not None else []
         return NavigatorResult(traj, sig[:, IR], sig[:, IV], sig[:, IP], status, pl, log,
-                               [e.to_dict() for e in self._episodes_done + self.bank.episodes],
-                               self.stats(), smoothed)
+                               [e.to_dict() for e in self._episodes_done + bank_eps],
+                               self.stats(), smoothed, st[:, PACK["bg"]], st[:, PACK["ba"]])
 
     def stats(self) -> dict:
         """The counts and estimates of the run (what ``--json`` prints)."""
@@ -910,12 +954,12 @@ class Navigator:
         counts = {s.value: 0 for s in FixStatus}
         for s in st:
             counts[s.value] += 1
-        flt = self.flt
+        flt = self.flt or self._last_flt
         out = {"fixes": len(st), "fix_status": counts,
                "fixes_excluded_later": int(np.sum(self.log["excluded"])),
                "start_s": self.start_info.get("t"),
                "start_attempts": self.start_info.get("attempts"),
-               "episodes": len(self.bank.episodes) if self.bank else 0,
+               "episodes": len(self._episodes_done) + (len(self.bank.episodes) if self.bank else 0),
                "resets_to_dead_reckoning": self.bank.alarms if self.bank else 0,
                "recoveries": self.bank.recoveries if self.bank else 0,
                "reinitialisations": self.counts["reinitialisations"],
@@ -982,4 +1026,5 @@ def feed(nav: Navigator, imu, gnss=None, *, odometer=None, progress=None,
     return nav
 
 
-__all__ = ["Navigator", "NavState", "NavigatorResult", "DEFAULT_OUT_RATE_HZ", "feed"]
+__all__ = ["Navigator", "NavState", "NavigatorResult", "DEFAULT_OUT_RATE_HZ", "feed",
+           "initial_filter"]

@@ -201,7 +201,7 @@ class EkfRoadAid:
     def __call__(self, t, flt):
         """The map's constraints at an aiding epoch, applied to ``flt`` (gated, χ² 0.999 as
         each says); returns the error-state correction (zeros when nothing applied)."""
-        meas = self._constraint(t, flt)
+        meas = self.constraints(t, flt)
         dx = np.zeros(flt.nx)
         for m in meas:
             if isinstance(m, dict):
@@ -316,8 +316,10 @@ class EkfRoadAid:
         out.append(LevelRoad(self.grade_sigma * float(np.hypot(v[0], v[1])) + 0.1))
         self.counts["grade"] += 1
 
-    def _constraint(self, t, flt):
-        """The measurements of this epoch (a list: the level road, a road line or corner)."""
+    def constraints(self, t, flt):
+        """The measurements of this epoch, not yet applied: a list of the level-road prior
+        (:class:`~selfnav.ins.measurements.LevelRoad`) and a road line or corner (a dict of
+        :class:`~selfnav.ins.measurements.RoadLine` fields, with ``gate``)."""
         meas = []
         ins, pf = flt.ins, self.pf
         x, y = self.g.to_local(ins.lat, ins.lon)
