@@ -28,6 +28,7 @@ import warnings
 import numpy as np
 
 from selfnav import api, sensors
+from selfnav.errors import SelfnavError
 from selfnav.evaluation import evaluate
 from selfnav.montecarlo import register_pair
 from selfnav.roads.graph import project_to_polyline, read_roads, road_polylines
@@ -129,8 +130,22 @@ def run_roadnav(seed: int, params: dict) -> dict:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         use_map = int(params["map_aid"]) if int(params["map_aid"]) >= 0 else seed % 2
-        sol = api.navigate(sim.imu, sim.gnss.as_gnss(), graph if use_map else None,
-                           method=str(params["method"]), odometer=sim.odometer)
+        try:
+            sol = api.navigate(sim.imu, sim.gnss.as_gnss(), graph if use_map else None,
+                               method=str(params["method"]), odometer=sim.odometer)
+        except SelfnavError:                # no start in the whole drive: a row that says so
+            sol = None
+    if sol is None:
+        nan = float("nan")
+        row = {k: nan for k in ROW_KEYS}
+        row.update({"map": spec["scenario"]["map"], "sim_seed": sim_seed,
+                    "windows": "; ".join(f"{w.start:.0f}+{w.duration:.0f} s {w.kind}" for w in wins),
+                    "startup_window": bool(wins and wins[0].start == 0.0),
+                    "kinds": "+".join(w.kind for w in wins), "grade": spec["imu"]["grade"],
+                    "map_aid": use_map, "off_route_s": float(spec["scenario"]["duration"]),
+                    "on_route": 0.0, "cpu_s": time.process_time() - c0,
+                    "wall_s": time.perf_counter() - w0})
+        return row
     c2 = time.process_time()
     ev = evaluate(sim.truth, sol.trajectory, roads=roads)
     m = ev.metrics
@@ -159,7 +174,17 @@ def run_roadnav(seed: int, params: dict) -> dict:
         "sim_cpu_s": c1 - c0, "nav_cpu_s": c2 - c1, "cpu_s": time.process_time() - c0,
         "wall_s": time.perf_counter() - w0,
     }
+    assert set(row) == set(ROW_KEYS)
     return row
+
+
+#: the columns of a roadnav row (a drive without a start has them too, NaN)
+ROW_KEYS = ("map", "sim_seed", "windows", "startup_window", "kinds", "along_rms_m",
+            "cross_rms_m", "along_max_m", "cross_max_m", "along_heading_rms_m",
+            "cross_heading_rms_m", "horizontal_rms_m", "horizontal_p95_m", "off_route_s",
+            "on_route", "start_s", "error", "sigma", "err_sigma_p95", "beyond_5sigma", "grade",
+            "map_aid", "odometer_sf", "odometer_sf_est", "sim_cpu_s", "nav_cpu_s", "cpu_s",
+            "wall_s")
 
 
 def _sigma_honesty(ev, sol) -> dict:
@@ -182,10 +207,14 @@ def summarize_roadnav(table: dict, worst: int = 5) -> dict:
         if k not in table:
             continue
         x = np.asarray(table[k], float)
+        x = x[np.isfinite(x)]
         out[k] = {"median": float(np.median(x)), "p95": float(np.percentile(x, 95)),
-                  "max": float(np.max(x))}
+                  "max": float(np.max(x))} if len(x) else {"median": float("nan"),
+                                                          "p95": float("nan"), "max": float("nan")}
     for k in ("along_rms_m", "cross_rms_m", "horizontal_rms_m"):
-        out[k]["pooled"] = float(np.sqrt(np.mean(np.square(np.asarray(table[k], float)))))
+        x = np.asarray(table[k], float)
+        out[k]["pooled"] = float(np.sqrt(np.mean(np.square(x[np.isfinite(x)]))))
+    out["runs_without_a_start"] = int(np.sum(~np.isfinite(np.asarray(table["along_rms_m"], float))))
     off = np.asarray(table["off_route_s"], float)
     out["runs_off_route_over_10_s"] = int(np.sum(off > 10.0))
     out["runs_off_route_over_20_s"] = int(np.sum(off > 20.0))

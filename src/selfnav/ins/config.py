@@ -180,6 +180,8 @@ class Initialisation:
     min_speed : the GNSS course gives the heading above this speed, m/s
     max_accel : bounded-acceleration motion model of the start-up consistency test, m/s²
     window : fewest fixes in the in-motion alignment's window
+    reinit_speed : a restart from the fixes (the INS lost) needs this speed for the course,
+        m/s
     healthy_window : fixes in the run that must look healthy before the start
     given_pos_sigma, given_vel_sigma, given_att_sigma : σ of a state given by another
         navigator or a survey (``--init``): m, m/s, (roll, pitch, heading) rad
@@ -192,6 +194,7 @@ class Initialisation:
     max_accel: float = 5.0
     window: int = 6
     healthy_window: int = 20
+    reinit_speed: float = 2.0
     given_pos_sigma: float = 1.0
     given_vel_sigma: float = 0.1
     given_att_sigma: tuple = (1.0 * DEG, 1.0 * DEG, 3.0 * DEG)
@@ -244,7 +247,10 @@ class VehicleConstraints:
     odometer_sigma : m/s, white error of one wheel-speed sample (quantisation, slip)
     odometer_step : s, the shortest interval between odometer updates (faster samples are
         thinned: the speed is smooth, each update costs an epoch)
-    use_magnetometer : a heading update from the magnetometer where the IMU has one
+    use_magnetometer : a heading update from the magnetometer where the IMU has one (off by
+        default: a car's deviation — hard and soft iron — changes with the heading, so through
+        the turns of a simulated drive the updates wrote it into the gyro bias and left the
+        covariance 20× too confident in it; a dead reckoning from that state turned 1.2°/s)
     max_imu_gap_samples : an IMU step longer than this many sample intervals is a gap the
         INS does not bridge: the navigator starts again after it
     mag_step : s between magnetometer heading updates
@@ -265,7 +271,7 @@ class VehicleConstraints:
     aid_step: float = 0.2
     odometer_sigma: float = 0.05
     odometer_step: float = 0.2
-    use_magnetometer: bool = True
+    use_magnetometer: bool = False
     max_imu_gap_samples: float = 6.0
     mag_step: float = 1.0
     mag_heading_sigma: float = 5.0 * DEG
@@ -346,7 +352,13 @@ class Integrity:
     onset_s : s of fixes after an episode opens that characterise the fault (a smooth fault
         is then extrapolated: the fixes are taken back when they no longer follow it)
     reinit_after_s : s of fixes that agree with each other and move with the INS but stand
-        outside its envelope before the INS, not the GNSS, is taken as the faulty side
+        outside its envelope before the INS, not the GNSS, is taken as the faulty side; and
+        the span of fixes the navigator restarts from when the INS is lost
+    reinit_sigma_ratio : the INS is lost when its position σ exceeds the fixes' by this
+        factor and they agree with each other (it has nothing left to add)
+    max_fault_s : the longest GNSS fault the navigator holds out against (seed 004: outliers
+        for up to 5 minutes): fixes that agree with each other after an episode this long,
+        with no reference left, restart the INS
     outage_s : s without a fix that count as an outage (status dead-reckoning)
     separation_floor_m : smallest σ of a separation between two solutions (numerics), m
     """
@@ -370,6 +382,8 @@ class Integrity:
     innovation_windows: tuple = (4, 8, 16, 32)
     velocity_span_s: float = 2.0
     reinit_after_s: float = 20.0
+    reinit_sigma_ratio: float = 10.0
+    max_fault_s: float = 300.0
     outage_s: float = 2.0
     separation_floor_m: float = 0.05
 

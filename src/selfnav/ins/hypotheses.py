@@ -69,6 +69,7 @@ class Episode:
     onset: list = field(default_factory=list)   # the first fixes' offsets from M (_RunFix)
     fault: dict | None = None                   # the fault's model from them (smooth faults)
     origin: tuple | None = None                 # (lat, lon) of the first fix of the episode
+    track: list = field(default_factory=list)   # the recent fixes by themselves
     characterised: bool = False
 
     def to_dict(self) -> dict:
@@ -96,6 +97,7 @@ class Verdict:
     reset_to: object = None             # a reference to reset M to (a filter)
     excluded_since: float | None = None  # fused fixes after this time are now excluded
     widen: np.ndarray | None = None      # open M's position σ to this offset first (INS fault)
+    reinit_from: list | None = None      # fixes to restart M from (the GNSS branch)
     run_velocity: tuple | None = None    # (velocity ENU, cov) the run of fixes shows
     add_R: np.ndarray | None = None      # 2×2 added to the fix's horizontal noise
     vehicle: dict = field(default_factory=dict)
@@ -128,6 +130,7 @@ class FaultBank:
         self.used_streak = 0            # consecutive fused fixes (normal mode)
         self.t_healthy = None           # since when the fixes have been fused without a break
         self.innov = []                 # whitened innovations of the recent fixes (normal mode)
+        self.episode_origin = None      # (lat, lon) the GNSS branch's track is relative to
         self._buf = []                  # IMU blocks since the last reference step
         self._t_step = -np.inf
         self._t_branch = -np.inf
@@ -338,6 +341,17 @@ class FaultBank:
                                self._latlon[1], 0.0)[:2]
         if not ep.characterised:
             self._characterise(ep, fix)
+        # the GNSS branch: the fixes by themselves (absolute positions), for "the INS is lost"
+        ep.track = [f for f in ep.track if f.t >= t - ig.reinit_after_s] + [fix]
+        lost = self._ins_lost(ep, flt, t)
+        if lost is not None:
+            self.episode_origin = ep.origin
+            self._close(t, kind="ins-fault")
+            self.reinits += 1
+            self.streak = 0
+            self.used_streak = 1
+            self.t_healthy = t
+            return Verdict(FixStatus.USED, lost[0], nis, reinit_from=lost[1])
         self.run.append(fix)
         self.run = [f for f in self.run if f.t >= t - ig.run_max_s]
         test = self._run_test(flt)
@@ -420,6 +434,20 @@ class FaultBank:
         if chi <= chi2_gate(2 * (len(tt) - 2), self.cfg.integrity.p_false_alarm) * 4.0:
             ep.fault = {"t": tc, "coef": coef, "cov": np.linalg.inv(N) * scale}
 
+    def _fault_llr(self, ep, flt, o, var, t):
+        """``((pred, C_f), llr)``: the smooth fault's line extrapolated to ``t`` (its offset
+        and covariance) and the log-likelihood ratio of an offset ``o`` (variance ``var``)
+        under it (H1) against zero — the dead reckoning's own error, σ from ``M`` (H0)."""
+        f = ep.fault
+        J = np.array([1.0, t - f["t"]])
+        pred = f["coef"].T @ J
+        C_f = (J @ f["cov"] @ J) * np.eye(2)
+        P_r = flt.P[:2, :2] + np.eye(2) * var
+        S1, S0 = P_r + C_f, P_r
+        q1 = float((o - pred) @ np.linalg.solve(S1, o - pred))
+        q0 = float(o @ np.linalg.solve(S0, o))
+        return (pred, C_f), 0.5 * (q0 - q1) - 0.5 * np.log(np.linalg.det(S1) / np.linalg.det(S0))
+
     def _fault_continues(self, ep, flt, test, t, span=0.0):
         """Is a run better explained by the smooth fault going on than by healthy fixes?
         Its offset now against the fault's line extrapolated (H1) and against zero — the
@@ -427,19 +455,10 @@ class FaultBank:
         by ``recovery_odds``, or the fault would by now sit within one σ of
         the dead reckoning (then the two cannot be told apart, and taking the fixes costs no
         more than the dead reckoning's own error). Returns the reason, or None."""
-        f = ep.fault
-        if f is None:
+        if ep.fault is None:
             return None, None
-        dt = t - f["t"]
-        J = np.array([1.0, dt])
-        pred = f["coef"].T @ J                         # (2,) the fault's offset now
-        C_f = (J @ f["cov"] @ J) * np.eye(2)
-        P_r = flt.P[:2, :2] + np.eye(2) * test["offset_var"]
         o = test["offset"]
-        S1, S0 = P_r + C_f, P_r
-        q1 = float((o - pred) @ np.linalg.solve(S1, o - pred))
-        q0 = float(o @ np.linalg.solve(S0, o))
-        llr = 0.5 * (q0 - q1) - 0.5 * np.log(np.linalg.det(S1) / np.linalg.det(S0))
+        (pred, C_f), llr = self._fault_llr(ep, flt, o, test["offset_var"], t)
         if llr < -np.log(self.cfg.integrity.recovery_odds):
             return None, None
         why = (f"its offset {np.hypot(*o):.1f} m against the fault's {np.hypot(*pred):.1f} m "
@@ -447,11 +466,57 @@ class FaultBank:
         if float(pred @ np.linalg.solve(flt.P[:2, :2], pred)) <= 1.0:
             return (f"the fault would be within the dead reckoning's σ ({why})",
                     np.outer(pred, pred) + C_f)
-        if span >= self.cfg.integrity.reinit_after_s:
-            # a fix inside the envelope is never refused for long: fused with the fault's
-            # possible offset in its σ (the fault model may be the dead reckoning's own drift)
+        if span >= self.cfg.integrity.reinit_after_s and llr <= 0.0:
+            # a fix inside the envelope is never refused for long once the fault no longer
+            # explains it better: fused with the fault's possible offset in its σ (the fault
+            # model may be the dead reckoning's own drift, after a false alarm)
             return (f"within the envelope for {span:.0f} s ({why})", np.outer(pred, pred) + C_f)
         return why, None
+
+    def _ins_lost(self, ep, flt, t):
+        """The other side of the bank: the INS, not the GNSS, is lost — ``(reason, track)``
+        or None. The last ``reinit_after_s`` of fixes must look healthy by themselves (their
+        second differences as a car's, :func:`selfnav.ins.align.healthy_start`: not white or
+        Gauss–Markov outliers) and move fast enough to give a course, and either the dead
+        reckoning's σ has grown past ``reinit_sigma_ratio`` times the fixes' (it has nothing
+        left to add) while the fault seen at the onset does not explain them better, or the
+        episode has outlasted ``max_fault_s`` (the longest GNSS fault the navigator holds out
+        against: seed 004's five minutes) with no reference left to say otherwise."""
+        from selfnav.ins.align import healthy_start
+
+        ig = self.cfg.integrity
+        tr = ep.track
+        if tr[-1].t - tr[0].t < ig.reinit_after_s - 1e-9 or len(tr) < ig.run_min_fixes + 2 \
+                or any(f.p is None for f in tr):
+            return None
+        tt = np.array([f.t for f in tr])
+        P = np.array([f.p for f in tr])
+        sig = np.array([f.sigma for f in tr])
+        if healthy_start(tt, P, sig, window=len(tr) - 2) is None:
+            return None
+        s_fix = float(np.median(sig))
+        # the course over the last seconds
+        last = tt >= tt[-1] - ig.velocity_span_s * 2.5
+        tl = tt[last] - tt[-1]
+        A = np.column_stack([np.ones_like(tl), tl, tl * tl])
+        coef, *_ = np.linalg.lstsq(A, P[last], rcond=None)
+        s_v = s_fix * float(np.sqrt(np.linalg.inv(A.T @ A)[1, 1]))
+        if np.hypot(*coef[1]) < max(self.cfg.init.reinit_speed, 4.0 * s_v):
+            return None
+        s_ins = float(np.sqrt(max(np.linalg.eigvalsh(flt.P[:2, :2])[-1], 0.0)))
+        long = t - ep.t_start >= ig.max_fault_s and not self.mature(t)
+        if not long:
+            if s_ins < ig.reinit_sigma_ratio * s_fix:
+                return None
+            if ep.fault is not None:
+                o = np.array([f.offset for f in tr[-ig.run_min_fixes:]]).mean(axis=0)
+                _, llr = self._fault_llr(ep, flt, o, s_fix**2 / ig.run_min_fixes, t)
+                if llr > 0.0:
+                    return None
+        why = (f"the episode outlasted {ig.max_fault_s:.0f} s" if long else
+               f"its σ {s_ins:.0f} m is {s_ins / s_fix:.0f}× theirs")
+        return (f"the INS was lost: {len(tr)} fixes over {tt[-1] - tt[0]:.0f} s agree with each "
+                f"other and {why}: restarted from them", list(tr))
 
     def _outside_references(self, flt, m_pos, t):
         """``(t0, χ²)`` of the youngest mature reference whose envelope the fix is outside,

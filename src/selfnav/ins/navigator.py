@@ -728,6 +728,10 @@ class Navigator:
             m = PositionFix(fx.t, fx.lat, fx.lon, fx.h, fx.sigma_h, fx.sigma_v).model(self.flt)
             flt = self.flt
         status, reason = v.status, v.reason
+        if v.reinit_from is not None:
+            self._reinit_from(v.reinit_from, fx)
+            self._log(fx, status, reason, v.nis, np.nan, np.nan)
+            return
         if v.widen is not None:
             # the INS-fault hypothesis won: its position σ opened to the offset of the run
             d = np.asarray(v.widen, float)
@@ -762,6 +766,48 @@ class Navigator:
             if nis_vel <= gate and (v.apply or self.bank.episode is not None):
                 self._dx = self._dx + flt.update(mv)
         self._log(fx, status, reason, v.nis, nis_v, nis_vel)
+
+    def _reinit_from(self, track, fx):
+        """The GNSS branch won (:meth:`selfnav.ins.hypotheses.FaultBank._ins_lost`): position
+        and velocity from the fixes of ``track`` (a quadratic through them, at the last),
+        heading from their course (a car moves along its body's forward axis), roll, pitch
+        and the sensor estimates kept; the covariance of what was restarted opened as at a
+        start; the references dropped (they dead-reckoned from the lost INS)."""
+        flt, cfg = self.flt, self.cfg
+        tt = np.array([f.t for f in track]) - track[-1].t
+        A = np.column_stack([np.ones_like(tt), tt, tt * tt])
+        P = np.array([f.p for f in track])
+        coef, *_ = np.linalg.lstsq(A, P, rcond=None)
+        s_fix = float(np.median([f.sigma for f in track]))
+        Ni = np.linalg.inv(A.T @ A)
+        s_p, s_v = s_fix * np.sqrt(Ni[0, 0]), s_fix * np.sqrt(Ni[1, 1])
+        v = coef[1]
+        speed = float(np.hypot(*v))
+        origin = self.bank.episode_origin
+        lat, lon, _ = offset_to_geodetic(origin[0], origin[1], 0.0,
+                                         np.array([coef[0][0], coef[0][1], 0.0]))
+        # the state is at the IMU's time, the track's last fix a lead earlier
+        lead = flt.t_true - track[-1].t
+        lat, lon, _ = offset_to_geodetic(float(lat), float(lon), 0.0,
+                                         np.array([v[0] * lead, v[1] * lead, 0.0]))
+        roll, pitch, _ = att.euler_from_dcm_nb(flt.ins.C_nb)
+        hdg = float(np.arctan2(v[0], v[1]))
+        flt.ins.set_state(lat=float(lat), lon=float(lon), h=float(fx.h),
+                          velocity_n=np.array([v[0], v[1], 0.0]),
+                          C_nb=att.dcm_nb_from_euler(roll, pitch, hdg))
+        Pm = flt.P
+        for sl in (IR, IV, IP):
+            Pm[sl, :] = 0.0
+            Pm[:, sl] = 0.0
+        Pm[IR, IR] = np.diag([s_p**2 * 4, s_p**2 * 4, fx.sigma_v**2])
+        Pm[IV, IV] = np.diag([(2 * s_v) ** 2, (2 * s_v) ** 2, 1.0])
+        att_s = cfg.init.att_sigma
+        Pm[IP, IP] = np.diag([att_s[0] ** 2, att_s[1] ** 2,
+                              (s_v / max(speed, 1e-3)) ** 2 + att_s[2] ** 2])
+        self.bank.refs = []
+        self._reset_flag = True
+        self._t_last_fused = fx.t
+        self.counts["reinitialisations"] += 1
 
     def _log(self, fx, status, reason, nis_h, nis_v, nis_vel):
         k = fx.index

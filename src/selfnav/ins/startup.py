@@ -154,6 +154,7 @@ class StartUp:
             self.last_error = str(e)
             return None
         if init is None:
+            self.last_error = "no start on the map's roads yet"
             return None
         return Start(dict(init), cfg, measured, notes)
 

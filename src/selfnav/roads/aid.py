@@ -20,7 +20,7 @@ from selfnav.roads.particles import TWO_PI, MatcherConfig, RoadParticles, wrap
 
 
 def start_on_roads(imu, gnss, graph: RoadGraph, cfg=None, *, span=30.0, far_sigmas=2.0,
-                   max_far=0.15, sigma=10.0, complete: bool = False):
+                   max_far=0.15, sigma=10.0, complete: bool = False, give_up_s=120.0):
     """The navigator's start (:func:`selfnav.ins.align.robust_init`) checked against the map.
 
     ``robust_init`` waits for a run of fixes that look healthy by themselves; a receiver that
@@ -34,14 +34,15 @@ def start_on_roads(imu, gnss, graph: RoadGraph, cfg=None, *, span=30.0, far_sigm
     start that passes, the first one is kept.
 
     ``complete`` (the causal navigator's start-up): only a start whose whole span lies in the
-    data and that follows a healthy run of fixes counts; None until there is one.
+    data and that follows a healthy run of fixes counts; None until there is one — or, when
+    ``give_up_s`` have passed since the first candidate without one on the roads, the latest.
     """
     sig = np.asarray(gnss.sigma_m, float) if gnss.sigma_m is not None else \
         np.full(len(gnss.t), np.nan)
     sig = np.where(np.isfinite(sig), sig, sigma)
     x, y = graph.to_local(gnss.lat, gnss.lon)
     xy = np.column_stack([x, y])
-    first = None
+    first = last = None
     t_from = -np.inf
     for _ in range(20):
         sub = gnss.select(gnss.t >= t_from)
@@ -56,13 +57,18 @@ def start_on_roads(imu, gnss, graph: RoadGraph, cfg=None, *, span=30.0, far_sigm
         first = first or init
         t0 = float(init["t"])
         if complete and gnss.t[-1] < t0 + span:
-            return None
+            break
+        last = init
         idx = np.flatnonzero((gnss.t >= t0 - 10.0) & (gnss.t <= t0 + span))
         if len(idx) < 5 or np.mean(_off_roads(graph, gnss.t, xy, idx, far_sigmas * sig)) \
                 <= max_far:
             return init
         t_from = t0 + span
     if complete:
+        # fixes that never lie on the map's roads for this long (a car park, a map that
+        # lacks the road): the latest start, not none
+        if last is not None and gnss.t[-1] - float(first["t"]) > give_up_s:
+            return dict(last, off_map=True)
         return None
     return first if first is not None else robust_init(imu, gnss, cfg=cfg)
 
