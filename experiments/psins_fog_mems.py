@@ -129,7 +129,7 @@ def default_config(**kw) -> FilterConfig:
     d = dict(arw=np.radians(0.1) / 60.0, vrw=0.01 / 60.0 * 10, gyro_bias_sigma=500 * DPH,
              accel_bias_sigma=10e-3 * 9.80665, gyro_bias_instability=10 * DPH,
              accel_bias_instability=1e-4, instability_tau=100.0, nhc=False, zupt=False,
-             robust=False, sigma_floor=0.1, aid_step=0.1)
+             bank=False, sigma_floor=0.1, aid_step=0.1)
     d.update(kw)
     return FilterConfig().updated(**d)
 

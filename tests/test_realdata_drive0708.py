@@ -47,17 +47,20 @@ def test_cli_defaults_on_clean_rtk(drive, tmp_path, capsys):
                              capsys)
     assert code == 0, err
     s = json.loads(out)
-    assert -0.26 < s["imu_time_offset_s"] < -0.15          # the earlier innovation scan: −0.20
+    # the IMU clock runs slow: the offset at the end and its drift (measured −0.365 s,
+    # −387 ppm; a constant-offset innovation scan gave −0.20 s, the drive's mean)
+    assert -0.45 < s["imu_time_offset_s"] < -0.25
+    assert -600.0 < s["imu_clock_drift_ppm"] < -150.0
     assert s["imu_time_offset_format_s"] == -0.125
     assert len(s["lever_arm_m"]) == 3 and max(map(abs, s["lever_arm_m"])) < 0.5
-    assert s["rejected"] == 0 and s["position_of"] == "antenna"
+    assert s["fix_status"]["rejected"] == 0 and s["position_of"] == "antenna"
     code, out, err = run_cli(["evaluate", "--truth", d / "gnss_1934_sf.pos", "--solution", sol,
                               "--json"], capsys)
     assert code == 0, err
     m = json.loads(out)
     assert m["horizontal_rms_m"] <= 0.15 and m["horizontal_max_m"] <= 1.0
     head = sol.read_text().splitlines()[0]          # the header row first (pandas reads it)
-    assert head.startswith("t,lat_deg") and head.endswith("sigma_h_m,gnss")
+    assert head.startswith("t,lat_deg") and head.endswith("sigma_h_m,status,protection_level_m")
     rows = log.read_text().splitlines()
     assert rows[2].startswith("t,status,reason,nis_h")
     assert sum(r.split(",")[1] == "used" for r in rows[3:]) > 1900
@@ -101,8 +104,7 @@ def test_outages_every_two_minutes(drive):
 def test_outliers_positions_only(drive, kind):
     """3 minutes of unflagged 200 m σ outliers and no GNSS velocity (positions only): inside
     the window the filter stays near the dead-reckoning bound (the same 3 minutes with no
-    fixes at all), and it is back on the RTK 30 s after the window — not lost. The plain χ²
-    gate, for contrast, is lost after the white window."""
+    fixes at all), and it is back on the RTK 30 s after the window — not lost."""
     _, imu, truth = drive
     start = truth.t[0] + 200.0
     g = with_outliers(truth, start, 180.0, kind=kind, seed=1, velocity="drop")
@@ -120,9 +122,6 @@ def test_outliers_positions_only(drive, kind):
         # over the 18-run placement scan of issue 4 (window max 27–73 m, docs/ekf.md)
         assert e[w].max() < 75.0, e[w].max()
     assert e[after].max() < 1.0
-    if kind == "white":
-        t, e = _errors(selfnav.navigate(imu, g, window_test=False), truth)
-        assert np.sqrt(np.mean(e[t >= start + 210.0] ** 2)) > 5.0
 
 
 def test_time_offset_sigma_covers_what_removing_data_moves(drive):

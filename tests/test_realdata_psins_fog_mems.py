@@ -24,7 +24,7 @@ def test_fog_mems_from_the_command_line(shared_data, tmp_path, capsys):
                              capsys)
     assert code == 0, err
     s = json.loads(out)
-    assert s["rejected"] == 0
+    assert s["fix_status"]["rejected"] == 0
     code, out, err = run_cli(["evaluate", "--truth", d / "fogavp.csv", "--solution", sol,
                               "--json"], capsys)
     assert code == 0, err

@@ -207,7 +207,10 @@ def register(app: typer.Typer) -> None:
         print(f"  GNSS fixes: {c['used']} used, {c['degraded']} used in part, "
               f"{c['rejected']} rejected, {c['suspect']} held while suspect, "
               f"{c['aligning']} before the start; {s['fixes_excluded_later']} excluded later")
-        print(f"  IMU time offset {s['imu_time_offset_s']:+.3f} s (estimate included); lever "
+        drift = (f", clock drift {s['imu_clock_drift_ppm']:+.0f} ppm"
+                 if "imu_clock_drift_ppm" in s else "")
+        print(f"  IMU time offset {s['imu_time_offset_s']:+.3f} s at the end (estimate "
+              f"included{drift}); lever "
               f"arm {', '.join(f'{x:.2f}' for x in s['lever_arm_m'])} m (RFU)")
         eps = [e for e in s.get("episodes", []) if e["kind"] != "outage"]
         if eps:

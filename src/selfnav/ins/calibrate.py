@@ -57,6 +57,9 @@ WHITE_TRUST_S = 20.0
 COURSE_MIN_SPEED = 3.0
 #: time offsets searched by the pre-pass, s
 OFFSET_RANGE = 0.6
+#: m: fixes this precise (RTK) give the course from their positions, free of the lag a
+#: receiver's velocity may have (drive_0708's .pos velocity lags 0.12 s)
+PRECISE_POSITION_M = 0.3
 #: a course from position differences is used only below this speed, m/s, and where it agrees
 #: with its neighbours' velocity within ``COURSE_MAX_ACCEL`` m/s² (unflagged outliers)
 COURSE_MAX_SPEED = 70.0
@@ -217,11 +220,14 @@ def estimate_time_offset(imu: ImuData, gnss: GnssData, *, search_s: float = OFFS
     Returns ``(offset_s, sigma_s)``: the offset to *add* to the IMU stamps; ``None`` when the
     drive has too little turning, or no course (no velocity and fixes too noisy).
     """
-    if gnss.velocity_n is not None and np.all(np.isfinite(gnss.velocity_n[:, :2])):
+    sig = gnss.sigma_m if gnss.sigma_m is not None else np.full(len(gnss.t), 5.0)
+    precise = len(gnss.t) >= 5 and np.nanmedian(sig) <= PRECISE_POSITION_M
+    if not precise and gnss.velocity_n is not None and np.all(np.isfinite(gnss.velocity_n[:, :2])):
+        # the receiver's velocity (it may lag: the caller shifts it by the lag it knows)
         t = gnss.t
         ve, vn = gnss.velocity_n[:, 0], gnss.velocity_n[:, 1]
     else:
-        sig = gnss.sigma_m if gnss.sigma_m is not None else np.full(len(gnss.t), 5.0)
+        # the course from positions, central differences: no lag (RTK: the better course)
         if len(gnss.t) < 5 or np.nanmedian(sig) > 1.0:
             return None
         p = enu_offset(gnss.lat[0], gnss.lon[0], 0.0, gnss.lat, gnss.lon, 0.0)

@@ -127,9 +127,14 @@ class StateOptions:
     lever_arm : the IMU → antenna lever arm (+3), from ``gnss.lever_arm_b``
     lever_arm_sigma : its initial σ per axis, m
     lever_arm_rw : its random walk, m/√s
-    time_offset : the residual IMU time offset (+1), s, left by the data pre-pass
+    time_offset : the IMU time offset (+1), s: what to add to the IMU stamps for GNSS time
     time_offset_sigma : its initial σ, s
-    time_offset_rw : its random walk, s/√s (clock drift)
+    time_offset_rw : its random walk, s/√s
+    clock_drift : the rate of the time offset (+1, with ``time_offset``), s/s: an IMU stamped
+        by its own counter drifts against GNSS time (drive_0708: −240 ppm, 0.09 s over its
+        9 minutes)
+    clock_drift_sigma : its initial σ, s/s (fact: a cheap counter's oscillator)
+    clock_drift_rw : its random walk, s/s/√s
     time_offset_check_s : s between re-estimates of the time offset from the past
         (:meth:`selfnav.ins.Navigator._check_time_offset`)
     time_offset_window_s : s of the past each re-estimate uses
@@ -157,6 +162,9 @@ class StateOptions:
     time_offset: bool = False
     time_offset_sigma: float = 0.3
     time_offset_rw: float = 1e-5
+    clock_drift: bool = True
+    clock_drift_sigma: float = 5e-4
+    clock_drift_rw: float = 1e-7
     time_offset_check_s: float = 30.0
     time_offset_window_s: float = 300.0
     time_offset_settled_s: float = 0.002

@@ -71,7 +71,7 @@ OFFDIAG = ((0, 1), (0, 2), (1, 0), (1, 2), (2, 0), (2, 1))
 
 #: optional error-state blocks: (name, size) in their order in the state vector
 BLOCKS = (("sg", 3), ("sa", 3), ("mg", 6), ("ma", 6), ("mu", 2), ("lever", 3), ("toff", 1),
-          ("vlag", 1), ("odo", 1))
+          ("tdrift", 1), ("vlag", 1), ("odo", 1))
 
 
 def _pack_layout():
@@ -101,6 +101,7 @@ class StateLayout:
     mu: slice | None = None
     lever: slice | None = None
     toff: slice | None = None
+    tdrift: slice | None = None
     vlag: slice | None = None
     odo: slice | None = None
 
@@ -109,7 +110,8 @@ class StateLayout:
         st = cfg.states
         on = {"sg": st.scale_factors, "sa": st.scale_factors, "mg": st.misalignment,
               "ma": st.misalignment, "mu": st.mount_states, "lever": st.lever_arm,
-              "toff": st.time_offset, "vlag": st.velocity_lag, "odo": st.odometer}
+              "toff": st.time_offset, "tdrift": st.time_offset and st.clock_drift,
+              "vlag": st.velocity_lag, "odo": st.odometer}
         n = NX
         blocks = {}
         for name, size in BLOCKS:
@@ -345,10 +347,10 @@ class InsGnssFilter:
     bias_scale : float
         ``λ_b``, a further scale of the slowly varying part (bias instability, lever arm,
         time offset and mounting random walks), which a still segment cannot measure.
-    bg, ba, sg, sa, mg, ma, mu, lever_b, time_offset, velocity_lag, odo_scale :
+    bg, ba, sg, sa, mg, ma, mu, lever_b, time_offset, clock_drift, velocity_lag, odo_scale :
         The estimated sensor errors (biases, scale factors, misalignment), mounting angles,
-        lever arm (body RFU, m), residual IMU time offset (s, added to the IMU stamps), GNSS
-        velocity lag (s) and odometer scale-factor error.
+        lever arm (body RFU, m), IMU time offset (s, added to the IMU stamps) and its drift
+        (s/s), GNSS velocity lag (s) and odometer scale-factor error.
     time_offset_applied : float
         The part of the IMU time offset applied outside the filter (reader and user), s:
         the true time of the state is ``ins.t + time_offset_applied + time_offset``.
@@ -370,6 +372,7 @@ class InsGnssFilter:
         self.mu = np.array(cfg.states.mount_rad, dtype=float)
         self.lever_b = np.array(cfg.gnss.lever_arm_b, dtype=float).reshape(3)
         self.time_offset = 0.0
+        self.clock_drift = 0.0
         self.time_offset_applied = float(time_offset_applied)
         self.velocity_lag = 0.0
         self.odo_scale = 0.0
@@ -385,10 +388,7 @@ class InsGnssFilter:
         P[IP, IP] = np.diag(np.square(cfg.init.att_sigma))
         P[IBG, IBG] = np.eye(3) * imu.gyro_bias_sigma**2
         P[IBA, IBA] = np.eye(3) * imu.accel_bias_sigma**2
-        prior = {"sg": imu.gyro_sf_sigma, "sa": imu.accel_sf_sigma, "mg": imu.gyro_mis_sigma,
-                 "ma": imu.accel_mis_sigma, "mu": st.mount_sigma, "lever": st.lever_arm_sigma,
-                 "toff": st.time_offset_sigma, "vlag": st.velocity_lag_sigma,
-                 "odo": st.odometer_scale_sigma}
+        prior = self.prior_sigma()
         for name, sl in lay.blocks():
             P[sl, sl] = np.eye(sl.stop - sl.start) * prior[name] ** 2
         self.P = P
@@ -410,7 +410,7 @@ class InsGnssFilter:
         # the geometry and timing of the installation (mounting, lever arm, time offset,
         # velocity lag, odometer scale) are not IMU noise: λ does not scale them
         self._q_fixed = np.zeros(self.nx)
-        for sl in (lay.mu, lay.lever, lay.toff, lay.vlag, lay.odo):
+        for sl in (lay.mu, lay.lever, lay.toff, lay.tdrift, lay.vlag, lay.odo):
             if sl is not None:
                 self._q_fixed[sl] = q[sl]
         self._q_slow = q - self._q_white - self._q_fixed
@@ -426,6 +426,7 @@ class InsGnssFilter:
         q[IBG] = 2 * imu.gyro_bias_instability**2 / imu.instability_tau
         q[IBA] = 2 * imu.accel_bias_instability**2 / imu.instability_tau
         for sl, rw in ((lay.lever, st.lever_arm_rw), (lay.toff, st.time_offset_rw),
+                       (lay.tdrift, st.clock_drift_rw),
                        (lay.mu, st.mount_rw), (lay.odo, st.odometer_scale_rw),
                        (lay.vlag, st.velocity_lag_rw)):
             if sl is not None:
@@ -551,6 +552,16 @@ class InsGnssFilter:
             q = q * self._vib_weights()
         Fcc, Fcp = self._F()
         _propagate_block(self.P, self._Phi_acc, Fcc, Fcp, q, h, nsub, self.track_transition)
+        lay = self.layout
+        if lay.tdrift is not None:
+            # the clock drift carries the time offset: δτ ← δτ + T δτ̇ (a shear of P that
+            # commutes with the block transition: no other state depends on δτ)
+            i, j = lay.toff.start, lay.tdrift.start
+            self.time_offset += self.clock_drift * T
+            self.P[i, :] += T * self.P[j, :]
+            self.P[:, i] += T * self.P[:, j]
+            if self.track_transition:
+                self._Phi_acc[i, :] += T * self._Phi_acc[j, :]
 
     # ------------------------------------------------------------------ updates
     def _correct(self, dx):
@@ -577,6 +588,8 @@ class InsGnssFilter:
             self.lever_b -= dx[lay.lever]
         if lay.toff is not None:
             self.time_offset -= float(dx[lay.toff.start])
+        if lay.tdrift is not None:
+            self.clock_drift -= float(dx[lay.tdrift.start])
         if lay.vlag is not None:
             self.velocity_lag -= float(dx[lay.vlag.start])
         if lay.odo is not None:
@@ -604,6 +617,44 @@ class InsGnssFilter:
         self._Phi_acc = np.eye(self.nx)
         return Phi
 
+    def prior_sigma(self) -> dict:
+        """The prior σ of each parameter block by name (:meth:`StateLayout.blocks`)."""
+        imu, st = self.cfg.imu, self.cfg.states
+        return {"sg": imu.gyro_sf_sigma, "sa": imu.accel_sf_sigma, "mg": imu.gyro_mis_sigma,
+                "ma": imu.accel_mis_sigma, "mu": st.mount_sigma, "lever": st.lever_arm_sigma,
+                "toff": st.time_offset_sigma, "tdrift": st.clock_drift_sigma,
+                "vlag": st.velocity_lag_sigma,
+                "odo": st.odometer_scale_sigma}
+
+    def reprior(self, *names):
+        """Return the named parameter blocks (``"lever"``, ``"vlag"``, ...; ``"bg"``, ``"ba"``,
+        the biases) to their prior σ with no correlation with the rest, the installation's
+        (lever arm, lag, mounting, odometer scale) to their configured values too (the
+        sensor errors keep theirs: the prior is centred on zero) — what was learnt there is
+        no longer trusted (an IMU time offset found far from the state had been absorbed by
+        the lever arm along the car and the velocity lag, which look alike)."""
+        prior = self.prior_sigma()
+        imu = self.cfg.imu
+        core = {"bg": (IBG, imu.gyro_bias_sigma), "ba": (IBA, imu.accel_bias_sigma)}
+        for name, sl in [(n, s) for n, s in self.layout.blocks()] + [(n, v[0]) for n, v
+                                                                     in core.items()]:
+            if name not in names:
+                continue
+            sigma = core[name][1] if name in core else prior[name]
+            self.P[sl, :] = 0.0
+            self.P[:, sl] = 0.0
+            self.P[sl, sl] = np.eye(sl.stop - sl.start) * sigma ** 2
+            if name == "lever":
+                self.lever_b = np.array(self.cfg.gnss.lever_arm_b, dtype=float).reshape(3)
+            elif name == "vlag":
+                self.velocity_lag = 0.0
+            elif name == "mu":
+                self.mu = np.array(self.cfg.states.mount_rad, dtype=float)
+            elif name == "odo":
+                self.odo_scale = 0.0
+            elif name == "tdrift":          # it had absorbed the offset error the reset finds
+                self.clock_drift = 0.0
+
     def copy(self) -> "InsGnssFilter":
         """An independent copy (state, covariance, sensor estimates), e.g. a dead-reckoning
         branch (:mod:`selfnav.ins.hypotheses`)."""
@@ -627,7 +678,8 @@ def pack_state(flt) -> np.ndarray:
     s = flt.ins
     return np.concatenate([[s.lat, s.lon, s.h], s.velocity_n, s.C_nb.reshape(9), flt.bg, flt.ba,
                            flt.sg, flt.sa, flt.mg, flt.ma, flt.mu, flt.lever_b,
-                           [flt.time_offset], [flt.velocity_lag], [flt.odo_scale]])
+                           [flt.time_offset], [flt.clock_drift], [flt.velocity_lag],
+                           [flt.odo_scale]])
 
 
 def unpack_states(t, states, Ps):

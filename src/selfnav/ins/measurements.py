@@ -231,7 +231,8 @@ class WheelSpeed(Measurement):
     """Wheel speed, m/s, at the NHC point in the vehicle frame, scaled by ``1 + k``::
 
         h = (1 + k̂) v_v,F,   ∂h/∂δv = (1 + k̂) C_vn[F],   ∂h/∂ψ = −(1 + k̂) C_vn[F] [v^n×],
-        ∂h/∂δk = v_v,F,      ∂h/∂δμ = −(1 + k̂) [v_v×][F] (pitch, yaw)
+        ∂h/∂δk = v_v,F,      ∂h/∂δμ = −(1 + k̂) [v_v×][F] (pitch, yaw),
+        ∂h/∂δε = −(1 + k̂) (C_vn a^n)[F]   (the sample is stamped in true time, like a fix)
     """
 
     speed: float
@@ -249,6 +250,8 @@ class WheelSpeed(Measurement):
             H[0, lay.mu] = -g * skew3(vv)[1, [0, 2]]
         if lay.odo is not None:
             H[0, lay.odo.start] = vv[1]
+        if lay.toff is not None:        # stamped in true time, as a fix: its lead grows with ε
+            H[0, lay.toff.start] = -g * float(C_vn[1] @ flt.acceleration_n)
         return Model(self.kind, np.array([g * vv[1] - float(self.speed)]), H,
                      np.array([[self.sigma**2]]))
 

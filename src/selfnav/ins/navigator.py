@@ -469,6 +469,15 @@ class Navigator:
         self.cfg = cfg
         self.start_info = {"t": float(init["t"]), "measured": start.measured,
                            "notes": list(start.notes), "attempts": st.attempts}
+        prior = str(self.startup.cfg.imu.grade)
+        if start.notes and not prior.startswith("auto"):
+            import warnings
+
+            from selfnav.errors import SelfnavWarning
+
+            warnings.warn(f"the IMU is noisier than the '{prior}' preset says "
+                          f"({'; '.join(start.notes)}): using the measured noise",
+                          SelfnavWarning, stacklevel=3)
         t0_stamp = float(init["t"]) - self.offset_applied
         flt = initial_filter(cfg, init, self.offset_applied)
         flt.track_transition = self.smoother
@@ -678,10 +687,14 @@ class Navigator:
         est = estimate_time_offset(imu, g)
         if est is None:
             return
-        tau, s_tau = est
+        tau_mid, s_tau = est
+        # the search's offset holds for the middle of its window; the clock drift carries it
+        # to now
+        age = t - float(np.mean([f.t for f in fx]))
+        tau = tau_mid + flt.clock_drift * age
         d = tau - flt.time_offset
         if self._debug:
-            print(f"toff check t={t:.1f} est {tau:+.4f}±{s_tau:.4f} state {flt.time_offset:+.4f}±{s_cur:.4f}")
+            print(f"toff check t={t:.1f} est {tau:+.4f}±{s_tau:.4f} state {flt.time_offset:+.4f}±{s_cur:.4f} drift {flt.clock_drift*1e6:.0f} ppm")
         if abs(d) > max(st.time_offset_coarse_s, 3.0 * np.hypot(s_tau, s_cur)):
             # the offset is the hardware's, not a hypothesis': the references take it too
             for f in [flt] + [r.flt for r in self.bank.refs]:
@@ -690,10 +703,13 @@ class Navigator:
                 f.P[i, :] = 0.0
                 f.P[:, i] = 0.0
                 f.P[i, i] = max(s_tau, st.time_offset_coarse_s) ** 2
+                f.reprior("lever", "vlag", "tdrift")
                 v, a = f.ins.velocity_n, f.acceleration_n
+                w_z = float((f.ins.C_nb.T @ f.omega_b)[2])
                 for k in range(3):
                     f.P[k, k] += (v[k] * d_f) ** 2
                     f.P[3 + k, 3 + k] += (a[k] * d_f) ** 2
+                f.P[8, 8] += (w_z * d_f) ** 2
             self._reset_flag = True
             self.counts["time_offset_resets"] += 1
 
@@ -1017,8 +1033,13 @@ class Navigator:
                 "imu_time_offset_sigma_s": (float(np.sqrt(flt.P[flt.layout.toff, flt.layout.toff][0, 0]))
                                             if flt.layout.toff is not None else 0.0),
                 "lever_arm_m": [float(x) for x in flt.lever_b],
+                "position_of": "antenna" if flt.layout.lever is not None else "imu",
                 "noise_scale": float(flt.q_scale),
                 "states": int(flt.nx)})
+            if flt.layout.tdrift is not None:
+                j = flt.layout.tdrift.start
+                out["imu_clock_drift_ppm"] = 1e6 * float(flt.clock_drift)
+                out["imu_clock_drift_sigma_ppm"] = 1e6 * float(np.sqrt(max(flt.P[j, j], 0.0)))
             if flt.layout.vlag is not None:
                 out["gnss_velocity_lag_s"] = float(flt.velocity_lag)
             if flt.layout.odo is not None:
