@@ -20,7 +20,9 @@ The Python API (each also a ``selfnav`` command):
 >>> sol.to_csv("sol.csv")                                  # doctest: +SKIP
 >>> selfnav.evaluate("truth.csv", sol)["horizontal_rms_m"] # doctest: +SKIP
 
-``read_imu, read_gnss, read_roads, read_solution, read_attitude`` read files;
+``Navigator`` is the real-time INS/GNSS(/map) navigator (``add_imu``, ``add_fix``: causal;
+``navigate`` is the batch loop over it); ``read_imu, read_gnss, read_roads, read_solution,
+read_attitude`` read files;
 ``estimate_latitude`` (seed 000), ``navigate_moving`` and ``MovingBaseNavigator`` (seeds
 002/003), ``navigate`` (EKF or seed 004, with or without roads), ``match`` (GNSS-only map
 matching; ``read_fleet``, ``match_fleet`` and ``match_files`` for fleets of tracks) and
@@ -45,6 +47,9 @@ _API = {
     "read_baro": "selfnav.api", "estimate_attitude": "selfnav.api",
     "compare_attitude": "selfnav.api", "read_reference_attitude": "selfnav.api",
     "Ahrs": "selfnav.ins.ahrs",
+    "Navigator": "selfnav.ins.navigator", "NavState": "selfnav.ins.navigator",
+    "FixDecision": "selfnav.ins.policy", "FixStatus": "selfnav.ins.policy",
+    "NavStatus": "selfnav.ins.policy",
     "simulate": "selfnav.sim.scenarios", "MovingBaseNavigator": "selfnav.moving",
     "navigate_moving": "selfnav.moving_driver",
     "ImuData": "selfnav.types", "GnssData": "selfnav.types", "Trajectory": "selfnav.types",

@@ -65,6 +65,9 @@ from selfnav.ins.strapdown import Strapdown
 from selfnav.types import Trajectory
 
 NX = 15
+#: blocks of the kinematic history :meth:`InsGnssFilter.back` integrates over (each an aiding
+#: step or less: seconds of it)
+KINEMATIC_BLOCKS = 64
 IR, IV, IP, IBG, IBA = slice(0, 3), slice(3, 6), slice(6, 9), slice(9, 12), slice(12, 15)
 #: the off-diagonal elements of a misalignment matrix, in the order of its six states
 OFFDIAG = ((0, 1), (0, 2), (1, 0), (1, 2), (2, 0), (2, 1))
@@ -393,6 +396,7 @@ class InsGnssFilter:
             P[sl, sl] = np.eye(sl.stop - sl.start) * prior[name] ** 2
         self.P = P
         self._f_n = np.array([0.0, 0.0, 9.8])
+        self._kin = []                     # the last blocks: (T s, mean acceleration ENU)
         self._w_b = np.zeros(3)
         self._f_b = np.array([0.0, 0.0, 9.8])
         self._Phi_acc = np.eye(self.nx)  # transition since the last stored epoch (smoother)
@@ -530,7 +534,35 @@ class InsGnssFilter:
         self._f_b = f_b
         self._f_n = self.ins.C_nb.T @ f_b
         self._w_b = sth / T
+        self._kin.append((float(T), self.acceleration_n))
+        if len(self._kin) > KINEMATIC_BLOCKS:
+            del self._kin[0]
         self.propagate_covariance(T)
+
+    def back(self, d):
+        """How far the nominal state was ``d`` s ago (``d`` ≥ 0, up to the span of the last
+        :data:`KINEMATIC_BLOCKS` blocks; beyond it the oldest block's acceleration holds):
+        ``(Δr, Δv)`` ENU with ``r(t − d) = r − Δr``, ``v(t − d) = v − Δv``, integrated over
+        the blocks' mean accelerations — what a fix or velocity ``d`` s old is compared with
+        (a receiver's latency, the velocity lag): one block's acceleration times ``d``
+        (first order) carries that block's noise and misses a turn or a brake."""
+        v = self.ins.velocity_n
+        dv = np.zeros(3)
+        dr = np.zeros(3)
+        left = float(d)
+        a = self.acceleration_n
+        for T, a in reversed(self._kin):
+            if left <= 0.0:
+                break
+            h = min(T, left)
+            # over h s before the point reached so far: v there is v − dv
+            dr += (v - dv) * h - 0.5 * a * h * h
+            dv += a * h
+            left -= h
+        if left > 0.0:
+            dr += (v - dv) * left - 0.5 * a * left * left
+            dv += a * left
+        return dr, dv
 
     def predict(self, t, dtheta, dv, dt=None):
         """Mechanize a block of IMU increments and propagate the covariance over it."""
@@ -668,6 +700,7 @@ class InsGnssFilter:
         out._Fcc = np.zeros_like(self._Fcc)
         out._Fcp = np.zeros_like(self._Fcp)
         out._Phi_acc = np.eye(self.nx)
+        out._kin = list(self._kin)
         out.track_transition = False
         return out
 

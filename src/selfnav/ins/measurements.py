@@ -9,15 +9,18 @@ navigator.
 **GNSS position** at the antenna and at the fix's time. The INS state of stamp ``t`` is the
 truth at ``t + ε`` (``ε`` the IMU time offset); the fix at true time ``t_k`` is compared with the
 state of true time ``t_s ≥ t_k`` moved back by the lead ``τ = t_s − t_k`` (under one IMU
-sample when the navigator queues fixes by true time)::
+sample when the navigator queues fixes by true time; up to a receiver's latency when a fix
+arrives after the IMU has passed it) over the recent accelerations
+(:meth:`selfnav.ins.ekf.InsGnssFilter.back`: a single block's acceleration times τ carries
+that block's noise and misses a brake or a turn)::
 
-    h(x) = r_INS − v^n τ + C_b^n l̂,   ∂h/∂δr = I, ∂h/∂ψ = [C_b^n l̂ ×], ∂h/∂δl = C_b^n,
+    h(x) = r_INS(t_s − τ) + C_b^n l̂,   ∂h/∂δr = I, ∂h/∂ψ = [C_b^n l̂ ×], ∂h/∂δl = C_b^n,
                                       ∂h/∂δε = −v^n                     (τ grows with ε)
 
 **GNSS velocity** at the antenna, reported ``λ_v`` late (receivers that difference positions or
 smooth the Doppler give the velocity of the last interval: 0.13 s on drive_0708)::
 
-    h(x) = v^n − a^n (τ + λ_v) + C_b^n (ω_b × l̂),  ∂h/∂δε = ∂h/∂δλ_v = −a^n
+    h(x) = v^n(t_s − τ − λ_v) + C_b^n (ω_b × l̂),  ∂h/∂δε = ∂h/∂δλ_v = −a^n
 
 **Non-holonomic constraint** in the *vehicle* frame at a point that does not slip sideways (the
 rear-axle centre): ``v_v = C_vb (C_bn^T v^n + ω_b × l_nhc)`` with ``C_vb = exp([μ×])``,
@@ -87,7 +90,10 @@ class PositionFix(Measurement):
         z = enu_offset(ins.lat, ins.lon, ins.h, self.lat, self.lon, self.h)
         v = ins.velocity_n
         lead = flt.t_true - self.t
-        r = l_n - v * lead - z
+        # the state moved back by the lead over the recent accelerations (a fix that arrives
+        # late, up to a receiver's latency after the IMU has passed it)
+        back = flt.back(lead)[0] if lead > 0.0 else v * lead
+        r = l_n - back - z
         H = np.zeros((3, flt.nx))
         H[0, 0] = H[1, 1] = H[2, 2] = 1.0
         H[:, IP] = skew3(l_n)
@@ -122,7 +128,8 @@ class VelocityFix(Measurement):
         delay = (flt.t_true - self.t) + flt.velocity_lag
         vz = np.asarray(self.velocity_n, float)
         rows = [0, 1, 2] if np.isfinite(vz[2]) else [0, 1]
-        r = ins.velocity_n + v_lever - a_n * delay - np.where(np.isfinite(vz), vz, 0.0)
+        back = flt.back(delay)[1] if delay > 0.0 else a_n * delay
+        r = ins.velocity_n + v_lever - back - np.where(np.isfinite(vz), vz, 0.0)
         H = np.zeros((3, flt.nx))
         H[0, 3] = H[1, 4] = H[2, 5] = 1.0
         H[:, IP] = skew3(v_lever)

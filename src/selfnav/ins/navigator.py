@@ -198,14 +198,26 @@ class Navigator:
     smoother : bool
         Keep what the RTS smoother needs (covariances, transitions): :meth:`result` can then
         smooth (more memory).
+    map : RoadGraph or path, optional
+        The road map (OSM ``.osm.pbf`` / ``.osm``, or a read graph): the road aid of
+        ``selfnav navigate --map`` is built on it (instead of ``road_aid``).
     """
 
     def __init__(self, config: FilterConfig | None = None, *, grade: str = "auto",
                  lever_arm_m=None, nhc_lever_m=None, nhc: bool = True,
                  imu_time_offset_s: float | None = None, odometer: bool = False,
                  road_aid=None, init: dict | None = None,
-                 out_rate_hz: float = DEFAULT_OUT_RATE_HZ, smoother: bool = False):
+                 out_rate_hz: float = DEFAULT_OUT_RATE_HZ, smoother: bool = False,
+                 map=None):
         from selfnav.ins.config import navigator_config
+
+        if map is not None:                 # a road graph or its file: the road aid of --map
+            if road_aid is not None:
+                raise SelfnavError("give the road map as map= or road_aid=, not both")
+            from selfnav.roads.aid import EkfRoadAid
+            from selfnav.roads.graph import RoadGraph, read_roads
+
+            road_aid = EkfRoadAid(map if isinstance(map, RoadGraph) else read_roads(map))
 
         if config is None:
             config = navigator_config(grade, lever_arm_m=lever_arm_m, nhc_lever_m=nhc_lever_m,
