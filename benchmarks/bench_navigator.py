@@ -1,7 +1,8 @@
 """Navigator speed against real time: 200 Hz IMU + 1 Hz GNSS (issue 5 target: > 100×).
 
 Simulated 600 s car drive on the Kotka map (consumer IMU + magnetometer, σ 10 m GNSS); times
-``run_seed`` (matcher seed and mht) and ``run_filter`` with and without the road aid, plus
+``run_seed`` (matcher seed and mht) and :func:`selfnav.navigate` (the causal
+:class:`selfnav.Navigator`) with and without the road map, plus
 GNSS-only HMM matching in fixes per second (target > 10,000/s).
 
 Run: ``python benchmarks/bench_navigator.py [--duration 600]``
@@ -11,9 +12,8 @@ from __future__ import annotations
 import argparse
 import time
 
-from selfnav import ins
+import selfnav
 from selfnav.roads.hmm import match_gnss
-from selfnav.roads.aid import EkfRoadAid
 from selfnav.roads.graph import read_roads
 from selfnav.seed004 import SeedConfig, run_seed
 from selfnav.sim.scenarios import simulate
@@ -34,9 +34,8 @@ def main():
     jobs = {
         "seed loop (seed)": lambda: run_seed(sim.imu, gd, graph, SeedConfig(matcher="seed")),
         "seed loop (mht)": lambda: run_seed(sim.imu, gd, graph, SeedConfig(matcher="mht")),
-        "EKF": lambda: ins.run_filter(sim.imu, gd, ins.FilterConfig.for_grade("consumer")),
-        "EKF + map": lambda: ins.run_filter(sim.imu, gd, ins.FilterConfig.for_grade("consumer"),
-                                            road_aid=EkfRoadAid(graph, gd)),
+        "EKF (Navigator)": lambda: selfnav.navigate(sim.imu, gd),
+        "EKF + map": lambda: selfnav.navigate(sim.imu, gd, graph),
     }
     print(f"{len(sim.imu.t)} IMU samples at {1 / sim.imu.dt:.0f} Hz, {len(gd.t)} fixes, {span:.0f} s")
     for name, f in jobs.items():

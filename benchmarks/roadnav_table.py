@@ -22,12 +22,10 @@ import time
 import numpy as np
 
 from selfnav import sensors
-from selfnav import ins
+import selfnav
 from selfnav.evaluation import evaluate
 from selfnav.roads.hmm import match_gnss
-from selfnav.roads.aid import EkfRoadAid
 from selfnav.roads.graph import project_to_polyline, read_roads
-from selfnav.ins.align import robust_init
 from selfnav.seed004 import SeedConfig, run_seed
 from selfnav.sim.scenarios import simulate
 from selfnav.types import Trajectory
@@ -104,13 +102,10 @@ def run_one(map_name, duration, seed, outliers=True):
         t0 = time.perf_counter()
         r = run_seed(sim.imu, gd, graph, SeedConfig(matcher=matcher))
         rows[name] = metrics(sim, graph, r.trajectory, time.perf_counter() - t0)
-    cfg = ins.FilterConfig.for_grade("consumer")
-    for name, aid in (("EKF", None), ("EKF + map", True)):
+    for name, roads in (("EKF", None), ("EKF + map", graph)):
         t0 = time.perf_counter()
-        # EKF + map: the road aid and the health-checked start (robust_init); EKF: as shipped
-        init = robust_init(sim.imu, gd) if aid else None
-        res = ins.run_filter(sim.imu, gd, cfg, init=init,
-                             road_aid=EkfRoadAid(graph, gd) if aid else None)
+        # the causal Navigator with the defaults of selfnav navigate (--map: the road aid)
+        res = selfnav.navigate(sim.imu, gd, roads)
         rows[name] = metrics(sim, graph, res.trajectory, time.perf_counter() - t0)
     t_start = rows["EKF + map"]["start_s"]
     t0 = time.perf_counter()

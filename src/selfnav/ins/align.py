@@ -30,7 +30,7 @@ Three steps, used as the data allow:
     pitch from the specific force, both by one TRIAD — the body forward axis is along the GNSS
     velocity and the measured specific force equals ``a^n − g^n`` from the GNSS acceleration.
 ``init_from_gnss``
-    The filter's in-motion start (:func:`selfnav.ins.run_filter`): the first straight,
+    The filter's in-motion start (:mod:`selfnav.ins.startup`): the first straight,
     constant-speed run of mutually consistent fixes (unflagged outliers at start-up break it),
     roll and pitch from the last still second before, honest initial σ.
 """

@@ -16,12 +16,11 @@ measurements replace the guess before and during the run:
    bias); the offset minimises the misfit (5 ms grid, parabolic refinement). Turns carry the
    information: a drive without turns returns no estimate.
 3. **Process-noise scale online** (:class:`NoiseAdapter`): ``λ`` multiplies the filter's
-   process noise. It is driven only by *trusted* fixes (accepted in normal mode, or
-   anchored to accepted ones by a velocity-checked chain, :class:`selfnav.ins.guard.FixChain`):
-   by the main filter's normalised innovations (upward, when the INS is more uncertain than
-   it says) and by the shadows' dead-reckoning errors over 5–90 s (both ways: the horizon
-   where the process noise, not the fix noise, decides). Each update is bounded, and an
-   outlier that is not trusted never enters — outliers cannot pump ``λ`` up.
+   process noise. It is driven only by the fixes the fault bank trusts
+   (:mod:`selfnav.ins.hypotheses`: used, no episode open), by the filter's normalised
+   innovations (upward, when the INS is more uncertain than it says), as a fixed point;
+   never below 1 — an outlier that is not trusted never enters, so outliers cannot pump
+   ``λ`` up.
 
 A preset is a prior: where the data is noisier than it says, the measured values win and
 :func:`calibrated_config` returns one warning line saying so.

@@ -37,6 +37,7 @@ protection level at the configured integrity risk (:meth:`FaultBank.protection_l
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -648,18 +649,25 @@ class FaultBank:
         and — while references stand behind it — the largest undetected fault the youngest
         mature reference allows (its detection threshold on the separation plus its bound)."""
         Ph = flt.P[:2, :2]
-        pl = self.k_pl * float(np.sqrt(max(np.linalg.eigvalsh(Ph)[-1], 0.0)))
+        pl = self.k_pl * float(np.sqrt(_largest_eig2(Ph)))
         if self.episode is not None:
             return pl
         mat = self.mature(t)
         if mat:
             b = mat[-1].flt
             Pb = b.P[:2, :2]
-            C = Pb - Ph
-            lam = float(max(np.linalg.eigvalsh(0.5 * (C + C.T))[-1], 0.0))
+            lam = _largest_eig2(Pb - Ph)
             pl = max(pl, float(np.sqrt(self.gate * lam))
-                     + self.k_pl * float(np.sqrt(max(np.linalg.eigvalsh(Pb)[-1], 0.0))))
+                     + self.k_pl * float(np.sqrt(_largest_eig2(Pb))))
         return pl
+
+
+def _largest_eig2(A) -> float:
+    """Largest eigenvalue of the symmetric part of a 2×2 matrix, clipped at 0 (closed form:
+    it runs at every output state)."""
+    a, d = float(A[0, 0]), float(A[1, 1])
+    b = 0.5 * (float(A[0, 1]) + float(A[1, 0]))
+    return max(0.5 * (a + d) + math.hypot(0.5 * (a - d), b), 0.0)
 
 
 __all__ = ["FaultBank", "Reference", "Episode", "Verdict"]

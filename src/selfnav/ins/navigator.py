@@ -249,6 +249,7 @@ class Navigator:
         self._t_last_fused = -np.inf
         self._t_last_fix = -np.inf
         self._fix_dt = []
+        self._fix_dt_median = 0.0
         self._blk_w, self._blk_f = [], []
         self._still = False
         self._acc = [0.0, np.zeros(3), np.zeros(3)]
@@ -293,7 +294,9 @@ class Navigator:
         if np.any(dt <= 0):
             raise SelfnavError(f"IMU samples must have increasing times (at {t[np.argmin(dt)]:.6f} s)")
         # a gap the INS cannot bridge: start again after it (no row stands inside a gap)
-        nominal = self._dt_nominal if self._dt_nominal else float(np.median(dt))
+        if not self._dt_nominal:           # the nominal step from the first three steps seen
+            self._dt_first = (getattr(self, "_dt_first", []) + list(dt[:3]))[:3]
+        nominal = self._dt_nominal if self._dt_nominal else float(np.median(self._dt_first))
         gap = np.flatnonzero(dt > self.cfg.vehicle.max_imu_gap_samples * nominal)
         if len(gap) and (prev is not None or gap[0] > 0):
             g = int(gap[0])
@@ -304,8 +307,8 @@ class Navigator:
             return self.add_imu(t[g:], w[g:], f[g:])
         self._t_prev_stamp = float(t[-1])
         self._decisions = []
-        self._dt_nominal = nominal if self._dt_nominal else float(np.median(dt)) if len(dt) > 2 \
-            else None
+        if not self._dt_nominal and len(self._dt_first) >= 3:
+            self._dt_nominal = nominal
         self._dt_prev = float(dt[-1])
         i = 0
         while self.flt is None and i < len(t):
@@ -367,6 +370,7 @@ class Navigator:
         if self.fixes and fx.t > self.fixes[-1].t:
             self._fix_dt.append(fx.t - self.fixes[-1].t)
             self._fix_dt = self._fix_dt[-20:]
+            self._fix_dt_median = float(np.median(self._fix_dt))
         self.fixes.append(fx)
         for key, val in (("t", fx.t), ("status", FixStatus.PENDING), ("reason", ""),
                          ("nis_h", np.nan), ("nis_v", np.nan), ("nis_vel", np.nan),
@@ -749,7 +753,7 @@ class Navigator:
         S3 = m.H @ flt.P @ m.H.T + m.R
         nis_v = float(m.r[2] ** 2 / S3[2, 2])
         if self._fix_dt:
-            self.bank.fix_dt = float(np.median(self._fix_dt))
+            self.bank.fix_dt = self._fix_dt_median
         v = self.bank.judge(flt, mh, fx.t, (fx.lat, fx.lon))
         if v.reset_to is not None:
             self._reset_to(v.reset_to, v.excluded_since)
@@ -868,7 +872,7 @@ class Navigator:
         if ep is not None and ep.kind != "outage":
             return NavStatus.SUSPECT
         hold = max(self.cfg.integrity.outage_s,
-                   2.5 * float(np.median(self._fix_dt)) if self._fix_dt else 0.0)
+                   2.5 * self._fix_dt_median if self._fix_dt else 0.0)
         return NavStatus.GNSS if t - self._t_last_fused <= hold else NavStatus.DEAD_RECKONING
 
     def _rows_from(self, tau, states):

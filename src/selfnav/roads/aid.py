@@ -102,7 +102,7 @@ def _heading_of(C_nb):
 
 
 class EkfRoadAid:
-    """``road_aid`` for :func:`selfnav.ins.run_filter` (``--method ekf --map``).
+    """``road_aid`` of :class:`selfnav.Navigator` (``--method ekf --map``).
 
     At every aiding epoch the cloud travels the INS distance with the INS heading and takes the
     GNSS fixes that have arrived. Once per ``interval`` it returns a constraint for
