@@ -45,15 +45,17 @@ def _rows_equal(a, b, n=None):
 
 
 def test_sample_by_sample_equals_batch(graph):
-    """One IMU sample a call, each fix added when its time comes (as a receiver delivers it),
-    gives the rows of the batch call to 1 mm; every add_imu returns a NavState."""
+    """One IMU sample a call, each fix handed over before the IMU reaches its time (a receiver
+    ahead of the IMU, as the batch call hands them over), gives the rows of the batch call to
+    1 mm; every add_imu returns a NavState. (A fix handed over after the IMU passed its time
+    cannot change the rows already out: docs/realtime.md and its test.)"""
     imu, g, truth = _drive(graph, 4, duration=160.0)
     batch = selfnav.navigate(imu, g)
     nav = Navigator()
     k = 0
     states = []
     for i in range(len(imu.t)):
-        while k < len(g.t) and g.t[k] <= imu.t[i]:
+        while k < len(g.t) and g.t[k] <= imu.t[i] + 0.5:
             d = nav.add_fix(g.t[k], np.degrees(g.lat[k]), np.degrees(g.lon[k]), g.h[k],
                             g.sigma_m[k])
             assert d.status in set(FixStatus)
@@ -155,8 +157,9 @@ def test_a_fix_ahead_of_the_imu_is_pending_and_decided_later(graph):
     assert d.status == FixStatus.PENDING
     k = (imu.t > 60.0) & (imu.t <= 61.0)
     st = nav.add_imu(imu.t[k], imu.omega_ib_b[k], imu.f_ib_b[k])
-    assert len(st.decisions) == 1 and st.decisions[0].t == 60.5
-    assert st.decisions[0].status != FixStatus.PENDING
+    # its decision comes with the state (with any fix the IMU had not reached at 60 s)
+    assert st.decisions and st.decisions[-1].t == 60.5
+    assert all(d.status != FixStatus.PENDING for d in st.decisions)
 
 
 def test_an_imu_gap_starts_the_navigator_again(graph):

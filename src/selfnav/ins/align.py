@@ -485,6 +485,27 @@ def _still_before(imu, t_end, gnss=None, g=9.8, window=1.0, lookback=30.0, accel
     return None
 
 
+def course_heading_covariance(velocity_n, cov_v, sigma_course):
+    """Covariance of a start whose heading is the course of its velocity (DESIGN §10).
+
+    Heading ``H = atan2(v_E, v_N)`` of the velocity ``v`` (ENU, horizontal covariance
+    ``cov_v``): ``δv = δs u + s δc w`` (``u`` along, ``w = (cos H, −sin H)`` across, ``s`` the
+    speed), so the course error is ``δc = w·δv / s`` and the heading error
+    ``ψ_U = δc − β`` with ``β`` the vehicle's own heading about its course (slip, the IMU's
+    yaw on the vehicle; σ ``sigma_course``). Returns ``(P_vv, P_vψ, P_ψψ)``: the 2×2
+    velocity block, its column with ``ψ_U`` and ``ψ_U``'s variance. Set independent, the
+    heading and the velocity's direction — one measurement — look like two, and the
+    non-holonomic constraint (the body moves along its heading) "learns" the heading from
+    their difference: the start's heading σ then shrank 3× in 20 s while its error stayed
+    (simulated drives, 13° at σ 4°)."""
+    v = np.asarray(velocity_n, float)[:2]
+    s = max(float(np.hypot(*v)), 1e-6)
+    w = np.array([v[1], -v[0]]) / s
+    C = np.asarray(cov_v, float)
+    cv = C @ w / s
+    return C, cv, float(w @ C @ w) / s**2 + float(sigma_course) ** 2
+
+
 def init_from_gnss(imu, gnss: GnssData, cfg: FilterConfig, sig_h):
     """Initial state for a vehicle: the in-motion alignment.
 
@@ -533,7 +554,10 @@ def init_from_gnss(imu, gnss: GnssData, cfg: FilterConfig, sig_h):
         lat = lat0 + coef[0, 1] / rm
         lon = lon0 + coef[0, 0] / (rn * np.cos(lat0))
         hdg = np.arctan2(v0[0], v0[1])
-        out = dict(t=t0, lat=lat, lon=lon, h=coef[0, 2], velocity_n=v0)
+        # the fixes of the window made this state: the filter must not take them again (they
+        # are not independent of it) — it starts taking fixes after ``t_used``
+        out = dict(t=t0, lat=lat, lon=lon, h=coef[0, 2], velocity_n=v0,
+                   t_used=float(gnss.t[sl][-1]))
         still = _still_before(imu, t0, gnss, float(normal_gravity(lat, coef[0, 2])),
                               accel_bias=cfg.imu.accel_bias_sigma)
         if still is not None:
@@ -573,7 +597,9 @@ def init_from_gnss(imu, gnss: GnssData, cfg: FilterConfig, sig_h):
         s_hdg = np.arctan2(sv, speed) + np.radians(2.0)
         out.update(C_nb=att.dcm_nb_from_euler(roll, pitch, hdg),
                    sigmas=([2 * sp, 2 * sp, 3 * sp], [2 * sv, 2 * sv, 2 * sv + 0.2],
-                           [s_tilt, s_tilt, 2 * s_hdg]))
+                           [s_tilt, s_tilt, 2 * s_hdg]),
+                   # the heading is the course of the velocity: one error (initial_filter)
+                   course_cov=np.eye(2) * (2 * sv) ** 2)
         return out
     raise SelfnavError(f"no run of {W} mutually consistent GNSS fixes on a straight line faster "
                        f"than {cfg.init.min_speed} m/s to start from (heading needs motion)")

@@ -193,6 +193,19 @@ class Initialisation:
     healthy_window : fixes in the run that must look healthy before the start
     given_pos_sigma, given_vel_sigma, given_att_sigma : σ of a state given by another
         navigator or a survey (``--init``): m, m/s, (roll, pitch, heading) rad
+    heading_split_sigma : the filter's linear range for the heading (σ, rad): a start less
+        sure of its heading is split into hypotheses this wide, a Gaussian sum the fixes
+        resolve (:mod:`selfnav.ins.headings`; None: never split) — a policy of the estimator
+    heading_split_max : the most hypotheses (a start with no heading: the whole circle)
+    heading_prune_ratio : a hypothesis this many times less likely than the best is dropped
+    heading_resolved_weight : the sum collapses to its best hypothesis once it holds this
+        share of the weight
+    heading_resolve_max_s : … or after this many seconds (the covariance then covers the
+        others)
+    course_heading_sigma : σ of a vehicle's heading about the course it is taken from (a
+        fact of the vehicle: its slip angle and the IMU's yaw on it), rad — beyond this the
+        heading's error is the course's, one error with the velocity's cross-track part
+        (:func:`selfnav.ins.align.course_heading_covariance`)
     """
 
     pos_sigma: float = 10.0
@@ -206,6 +219,12 @@ class Initialisation:
     given_pos_sigma: float = 1.0
     given_vel_sigma: float = 0.1
     given_att_sigma: tuple = (1.0 * DEG, 1.0 * DEG, 3.0 * DEG)
+    course_heading_sigma: float = 4.0 * DEG
+    heading_split_sigma: float | None = 3.0 * DEG
+    heading_split_max: int = 31
+    heading_prune_ratio: float = 1e4
+    heading_resolved_weight: float = 0.99
+    heading_resolve_max_s: float = 120.0
 
 
 @dataclass
@@ -367,6 +386,19 @@ class Integrity:
     max_fault_s : the longest GNSS fault the navigator holds out against (seed 004: outliers
         for up to 5 minutes): fixes that agree with each other after an episode this long,
         with no reference left, restart the INS
+    fault_white_sigmas : the white-outlier family of the run test
+        (:mod:`selfnav.ins.runtest`): σ of the outliers, in fix σ (a fact of GNSS faults:
+        multipath to a wrong lock, 3–100× the receiver's own noise)
+    fault_gm_sigmas, fault_gm_s : the correlated family: σ (in fix σ) and correlation times,
+        s, of errors that wander (multipath, a receiver's slow loss of lock)
+    fault_ramp_mps : the ramp family: the rates of a drag, m/s (a spoofer's, a receiver
+        pulled off), with an offset of ``fault_ramp_onset_s`` times that rate
+    fault_ramp_onset_s : s of drag before a ramp is noticed (the offset it carries then)
+    fault_mean_s : the mean length of a GNSS fault, s: the prior odds that an episode's fault
+        has ended after ``d`` s are ``e^{d/T} − 1`` (runs the evidence cannot tell from health
+        are taken back after ``T ln(1/α)``; seed 004's windows last up to 5 minutes)
+    lost_m, lost_mps, lost_rad : the INS-lost hypothesis of the run test: how far the dead
+        reckoning may be off beyond its covariance, m, m/s and rad of heading
     outage_s : s without a fix that count as an outage (status dead-reckoning)
     separation_floor_m : smallest σ of a separation between two solutions (numerics), m
     """
@@ -392,6 +424,15 @@ class Integrity:
     reinit_after_s: float = 20.0
     reinit_sigma_ratio: float = 10.0
     max_fault_s: float = 300.0
+    fault_white_sigmas: tuple = (3.0, 10.0, 30.0, 100.0)
+    fault_gm_sigmas: tuple = (3.0, 10.0, 30.0)
+    fault_gm_s: tuple = (2.0, 10.0, 30.0)
+    fault_ramp_mps: tuple = (0.5, 3.0)
+    fault_ramp_onset_s: float = 10.0
+    fault_mean_s: float = 30.0
+    lost_m: float = 1000.0
+    lost_mps: float = 10.0
+    lost_rad: float = 1.0
     outage_s: float = 2.0
     separation_floor_m: float = 0.05
 

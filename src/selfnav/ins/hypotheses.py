@@ -247,7 +247,9 @@ class FaultBank:
             before = [r for r in self.mature(t) if r.t0 <= t_from]
             if before:
                 ref = before[-1]
-                self._open(ref.t0, reset=True)
+                # the episode starts when the fault did (as far as the sums tell); M goes
+                # back to the reference before it
+                self._open(max(ref.t0, t_from), reset=True)
                 self.refs = [r for r in self.refs if r.t0 <= ref.t0]
                 return Verdict(FixStatus.REJECTED, f"{why} since {ref.t0:.1f} s", nis,
                                reset_to=ref.flt, excluded_since=ref.t0)
@@ -409,6 +411,17 @@ class FaultBank:
                            apply=True, widen=test["offset"],
                            run_velocity=test.get("velocity"))
         why = test["why"]
+        onset = self._fault_continues(ep, flt, test, t, span)[0] if ep.fault is not None \
+            else None
+        if test["white"] and in_gate and onset is None \
+                and self._outside_references(flt, m_pos, t) is None:
+            # health and the faults that remain cannot be told apart (a dead reckoning wider
+            # than what distinguishes them): the fix is fused as their mixture — its σ carrying
+            # the variance those faults would add, weighted by their posterior — so a fix
+            # inside the envelope is never refused for long, and taken no more than it is worth
+            return Verdict(FixStatus.DEGRADED, f"{why}; fused with the faults' variance "
+                           f"(p {test['p_fault']:.2f}, σ +{np.sqrt(test['add_R'][0, 0]):.0f} m)",
+                           nis, apply=True, add_R=test["add_R"])
         if not in_gate:
             why = f"outside the dead-reckoning envelope (NIS {nis:.3g}); {why}"
         return Verdict(FixStatus.SUSPECT if in_gate else FixStatus.REJECTED, why, nis)
@@ -551,51 +564,56 @@ class FaultBank:
         return None
 
     def _run_test(self, flt):
-        """Do the fixes of the run move with the INS? None while the run is too short; else
-        ``white`` (their offsets from ``M`` scatter as their σ about a quadratic — the INS's
-        own drift over a few seconds — white outliers and a Gauss–Markov error do not),
-        ``moves`` (the offsets' rate at the run's end within what ``M``'s velocity σ allows:
-        a drag faster than the dead reckoning drifts does not), the offset and a reason."""
+        """Are the fixes of the run healthy again? None while the run is too short; else the
+        sequential likelihood-ratio test of :mod:`selfnav.ins.runtest`: ``white`` (no fault
+        model explains the run decisively better than health: the run goes on; else it starts
+        again from the newest fix), ``moves`` (health wins by ``ln(1/α)`` with the prior odds
+        that a fault has ended by now, ``e^{d/T} − 1`` after ``d`` s of an episode whose faults
+        last ``fault_mean_s`` on average), the offset and its rate (a quadratic through the
+        offsets), the log Bayes factors and a reason."""
+        from selfnav.ins.runtest import run_evidence, strongest_fault
+
         ig = self.cfg.integrity
         run = self.run
         if len(run) < ig.run_min_fixes or run[-1].t - run[0].t < ig.run_s - 1e-9:
             return None
         tt = np.array([f.t for f in run])
         o = np.array([f.offset for f in run])
-        # the fixes' σ and the dead reckoning's own wander over the run (the velocity random
-        # walk, which no quadratic absorbs): ``q_v T³/3``
-        T = tt[-1] - tt[0]
-        wander = float(np.mean(flt.white_velocity_density()[:2])) * T**3 / 3.0
-        # and what a quadratic cannot follow of an acceleration error that changes as the
-        # specific force turns against an attitude error (a long dead reckoning's heading)
-        wander += (flt.acceleration_sigma() * T * T / 8.0) ** 2
-        s = np.sqrt(np.array([f.sigma for f in run]) ** 2 + wander)
-        w = 1.0 / s**2
+        sig = np.array([f.sigma for f in run])
+        p_ins = np.array([f.p - f.offset if f.p is not None else -f.offset for f in run])
+        idx = [0, 1, 3, 4, 8]
+        ev = run_evidence(tt, o, sig, p_ins, flt.P[np.ix_(idx, idx)], flt.acceleration_sigma(),
+                          float(np.mean(flt.white_velocity_density()[:2])), ig,
+                          fix_sigma=float(np.median(sig)))
+        bf = ev["healthy"] - ev["fault"]
+        d = tt[-1] - (self.episode.t_start if self.episode is not None else tt[0])
+        prior = math.log(math.expm1(min(max(d, 1e-3) / ig.fault_mean_s, 50.0)))
+        threshold = -math.log(ig.p_false_alarm)
+        white = bf > -threshold
+        moves = bf + prior >= threshold
+        n, dur = len(run), tt[-1] - tt[0]
+        if not white:
+            why = f"the fixes look faulty ({strongest_fault(ev)}; log Bayes factor {bf:+.1f})"
+        elif not moves:
+            why = (f"{n} fixes over {dur:.0f} s not yet healthy (log Bayes factor {bf:+.1f}, "
+                   f"prior {prior:+.1f}, against {strongest_fault(ev)})")
+        else:
+            why = f"{n} fixes over {dur:.0f} s healthy (log Bayes factor {bf:+.1f})"
+        # the offset and its rate now (a quadratic through the offsets, weighted by the fixes'
+        # σ): what the run says of the dead reckoning's error
+        w = 1.0 / sig**2
         tc = tt - tt[-1]
         A = np.column_stack([np.ones_like(tc), tc, tc * tc])
         Aw = A * w[:, None]
         N = A.T @ Aw
         coef = np.linalg.solve(N, Aw.T @ o)            # (3, 2): offset, rate, curvature
-        res = o - A @ coef
-        chi_res = float(np.sum(w[:, None] * res**2))
-        dof = 2 * (len(run) - 3)
-        white = chi_res <= chi2_gate(dof, ig.p_false_alarm)
-        rate = coef[1]
-        C = flt.P[3:5, 3:5] + np.eye(2) * np.linalg.inv(N)[1, 1]
-        q_rate = float(rate @ np.linalg.solve(C, rate))
-        moves = q_rate <= self.gate
-        n, dur = len(run), tt[-1] - tt[0]
-        if not white:
-            why = f"the fixes scatter beyond their σ (χ² {chi_res:.3g} for {dof})"
-        elif not moves:
-            why = f"the fixes drift against the INS at {np.hypot(*rate):.2f} m/s (χ² {q_rate:.3g})"
-        else:
-            why = f"{n} fixes over {dur:.0f} s move with the INS"
-        if self.diag is not None:
-            self.diag.append(("run", tt[-1], n, dur, white, moves, rate.tolist(), np.sqrt(np.diag(C)).tolist(), coef[0].tolist(), chi_res, dof))
         Ni = np.linalg.inv(N)
+        # the posterior of "the fault goes on" and the variance it asks a fused fix to carry
+        p_fault = 1.0 / (1.0 + math.exp(min(bf + prior, 50.0)))
         out = {"white": white, "moves": moves, "offset": coef[0], "why": why,
-               "offset_var": float(Ni[0, 0]), "rate": rate, "rate_cov": np.eye(2) * Ni[1, 1]}
+               "offset_var": float(Ni[0, 0]), "rate": coef[1], "rate_cov": np.eye(2) * Ni[1, 1],
+               "log_bf": bf, "log_lost": ev["lost"] - max(ev["healthy"], ev["fault"]),
+               "p_fault": p_fault, "add_R": np.eye(2) * p_fault * ev["fault_variance"]}
         last = [f for f in run if f.t >= tt[-1] - ig.velocity_span_s - 1e-9]
         if len(last) >= 4 and all(f.p is not None for f in last):
             # the fixes' own velocity at the run's end (a quadratic through their positions
@@ -611,6 +629,33 @@ class FaultBank:
             k = max(float(np.sum(wf[:, None] * res_f**2)) / max(2 * (len(last) - 3), 1), 1.0)
             out["velocity"] = (cf[1], np.eye(2) * np.linalg.inv(Nf)[1, 1] * k)
         return out
+
+    def on_correction(self, dx, flt):
+        """``M`` was corrected by ``dx`` (an aid while the episode is open: a stop's zero
+        velocity, the non-holonomic constraint, a fused fix): the run's offsets are re-expressed
+        against the corrected dead reckoning — its position and velocity correction carried
+        back over the run, its heading correction turning the path driven since — so that the
+        run test sees the dead reckoning's error smooth, not a jump at each correction (a stop
+        after a long dead reckoning moved ``M`` 50 m, and clean fixes across it looked
+        faulty)."""
+        ep = self.episode
+        if ep is None or not self.run:
+            return
+        t_now = flt.t_true
+        p_now = None
+        if ep.origin is not None:
+            p_now = enu_offset(ep.origin[0], ep.origin[1], 0.0, flt.ins.lat, flt.ins.lon,
+                               0.0)[:2]
+        seen = set()
+        for f in self.run + ep.onset:
+            if id(f) in seen:
+                continue
+            seen.add(id(f))
+            shift = dx[0:2] + dx[3:5] * (f.t - t_now)
+            if p_now is not None and f.p is not None:
+                d = (f.p - f.offset) - p_now
+                shift = shift + float(dx[8]) * np.array([d[1], -d[0]])
+            f.offset = f.offset + shift
 
     def _open(self, t, reset, sep=0.0):
         self.innov = []
@@ -657,12 +702,13 @@ class FaultBank:
         self.episode = self.outage = None
 
     # ------------------------------------------------------------------ integrity
-    def protection_level(self, flt, t) -> float:
-        """Horizontal protection level at the configured integrity risk, m: ``M``'s own bound,
-        and — while references stand behind it — the largest undetected fault the youngest
-        mature reference allows (its detection threshold on the separation plus its bound)."""
+    def protection_level(self, flt, t, P_out=None) -> float:
+        """Horizontal protection level at the configured integrity risk, m: ``M``'s own bound
+        (of the reported point, ``P_out``: :func:`selfnav.ins.ekf.output_covariance`), and —
+        while references stand behind it — the largest undetected fault the youngest mature
+        reference allows (its detection threshold on the separation plus its bound)."""
         Ph = flt.P[:2, :2]
-        pl = self.k_pl * float(np.sqrt(_largest_eig2(Ph)))
+        pl = self.k_pl * float(np.sqrt(_largest_eig2(Ph if P_out is None else P_out)))
         if self.episode is not None:
             return pl
         mat = self.mature(t)

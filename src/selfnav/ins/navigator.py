@@ -42,7 +42,8 @@ from selfnav.errors import SelfnavError
 from selfnav.ins.calibrate import NoiseAdapter, vibration_level, vibration_scale
 from selfnav.ins.config import FilterConfig
 from selfnav.ins.ekf import (IBA, IBG, IP, IR, IV, PACK, PACK_SIZE, InsGnssFilter, apply_error,
-                             pack_state, rts_smooth)
+                             output_covariance, pack_state, rts_smooth)
+from selfnav.ins.headings import split_heading
 from selfnav.ins.hypotheses import FaultBank
 from selfnav.ins.measurements import (Heading, NonHolonomic, PositionFix, RunVelocity,
                                       VelocityFix, WheelSpeed, ZeroVelocity)
@@ -151,6 +152,22 @@ def _still(w_blk, f_blk, C_nb, veh):
             and np.hypot(f_n[0], f_n[1]) < veh.zupt_accel_h)
 
 
+def set_course_heading(flt, cov_v, sigma_course):
+    """``flt``'s velocity and heading covariance for a heading taken from the course of its
+    velocity (:func:`selfnav.ins.align.course_heading_covariance`): the horizontal velocity
+    block and its correlation with ``ψ_U``, uncorrelated with the rest."""
+    from selfnav.ins.align import course_heading_covariance
+
+    C, cv, var = course_heading_covariance(flt.ins.velocity_n, cov_v, sigma_course)
+    P = flt.P
+    for k in (3, 4, 8):
+        P[k, :] = 0.0
+        P[:, k] = 0.0
+    P[3:5, 3:5] = C
+    P[3:5, 8] = P[8, 3:5] = cv
+    P[8, 8] = var
+
+
 def initial_filter(cfg: FilterConfig, init: dict, time_offset_applied: float = 0.0):
     """The error-state filter of a start ``init`` (true time ``t``, ``lat, lon, h, velocity_n,
     C_nb``; optionally ``sigmas`` (position, velocity, attitude σ triples), ``gyro_bias`` and
@@ -164,6 +181,9 @@ def initial_filter(cfg: FilterConfig, init: dict, time_offset_applied: float = 0
         flt.P[IR, IR] = np.diag(np.square(sp))
         flt.P[IV, IV] = np.diag(np.square(sv))
         flt.P[IP, IP] = np.diag(np.square(sa))
+    if "course_cov" in init:
+        # the heading was taken from the course of the velocity: one error, not two
+        set_course_heading(flt, init["course_cov"], cfg.init.course_heading_sigma)
     if "tilt_bias_map" in init:
         A = np.asarray(init["tilt_bias_map"], dtype=float)
         Pb = flt.P[IBA, IBA].copy()
@@ -276,6 +296,7 @@ class Navigator:
         self._odo_warned = False
         self._dt_nominal = None
         self.restarts = []
+        self._hyp = None               # the heading hypotheses of a start (selfnav.ins.headings)
 
     # ================================================================== input
     def add_imu(self, t, gyro_rad_s, accel_m_s2) -> NavState:
@@ -472,6 +493,7 @@ class Navigator:
         self._given_init = None
         self._acc = [0.0, np.zeros(3), np.zeros(3)]
         self._blk_w, self._blk_f = [], []
+        self._hyp = None
 
     def _start(self, start):
         st = self.startup
@@ -511,17 +533,26 @@ class Navigator:
             self.vib_reference = None
         self.bank = FaultBank(cfg, self.adapter)
         t0 = float(init["t"])
+        # a heading outside the filter's linear range: a Gaussian sum until the fixes resolve it
+        self._hyp = split_heading(flt, cfg)
+        if self._hyp is not None:
+            self.flt = self._hyp.filters[self._hyp.best]
+            self.start_info["heading_hypotheses"] = self._hyp.spawned
         self._n_aid = int(math.floor(t0 / cfg.vehicle.aid_step)) + 1
         self._next_row = self._row_after(t0)
         if self.road_aid is not None:
             self.road_aid.on_start(t0, flt)
         # catch up: the buffered stream after the start, through the normal epochs
         imu = st.imu()
+        # the fixes the alignment used are in the start state already (taken again as if
+        # independent of it, they made the start's heading σ shrink without its error)
+        t_used = max(t0, float(init.get("t_used", t0)))
         for fx in st.fixes:
-            if fx.t > t0:
+            if fx.t > t_used:
                 self._push(fx.t, _KIND_FIX, fx)
             else:
                 self.log["status"][fx.index] = FixStatus.ALIGNING
+                self.log["reason"][fx.index] = "used by the alignment"
         for (t_o, v_o, s_o) in st.odometer:
             if t_o > t0:
                 self._push_odometer(t_o, v_o, s_o)
@@ -577,11 +608,15 @@ class Navigator:
                 self._emit_row(self._next_row)
                 self._next_row = self._row_after(self._next_row)
         dth, dv = w * dt[:, None], f * dt[:, None]
-        sth, sdv, states = flt.mechanize(t, dth, dv, dt, states=rows)
-        a = self._acc
-        a[0] += float(dt.sum())
-        a[1] += sth
-        a[2] += sdv
+        if self._hyp is not None:
+            # every heading hypothesis follows the IMU (each keeps its own sums)
+            sth, sdv, states = self._hyp.mechanize(t, dth, dv, dt, rows, self._m_index())
+        else:
+            sth, sdv, states = flt.mechanize(t, dth, dv, dt, states=rows)
+            a = self._acc
+            a[0] += float(dt.sum())
+            a[1] += sth
+            a[2] += sdv
         self._blk_w.append(w - flt.bg)
         self._blk_f.append(f - flt.ba)
         self.bank.on_imu(t, dth, dv, dt, self._still)
@@ -597,8 +632,18 @@ class Navigator:
                 self._emit_row(T, tau[k], pos[k], vel[k], C[k])
                 self._next_row = self._row_after(T)
 
+    def _filters(self):
+        """The filters every measurement goes to: ``M``, or every heading hypothesis."""
+        return [self.flt] if self._hyp is None else self._hyp.filters
+
+    def _m_index(self) -> int:
+        return self._hyp.filters.index(self.flt)
+
     def _propagate_to_now(self):
         """The covariance to the last mechanized sample."""
+        if self._hyp is not None:
+            self._hyp.propagate()
+            return
         a = self._acc
         if a[0] > 0:
             self.flt.propagate(a[0], a[1], a[2])
@@ -625,9 +670,14 @@ class Navigator:
         elif kind == _KIND_ODO:
             speed, sigma = payload
             s = cfg.vehicle.odometer_sigma if sigma is None else float(sigma)
-            m = WheelSpeed(speed, s).model(flt)
-            q = flt.nis(m)
-            self._dx = self._dx + flt.update(m, max(1.0, q / self._gate_v))
+            for f in self._filters():
+                m = WheelSpeed(speed, s).model(f)
+                q = f.nis(m)
+                dx = f.update(m, max(1.0, q / self._gate_v))
+                if f is flt:
+                    self._dx = self._dx + dx
+        if self.bank.episode is not None and self._dx.any() and self.flt is flt:
+            self.bank.on_correction(self._dx, flt)
         self._record_epoch()
 
     def _aid_epoch(self, te):
@@ -642,20 +692,26 @@ class Navigator:
         if self.vib_reference is not None:
             kv = vibration_scale(vibration_level(w_blk, f_blk), self.vib_reference,
                                  self.cfg.adaptation.vibration_cap)
-            flt.vibration = kv
-            for ref in self.bank.refs:
-                ref.flt.vibration = kv
-        if self._still:
-            self._dx = self._dx + flt.update(ZeroVelocity(veh.zupt_sigma).model(flt))
-        elif veh.nhc:
-            self._dx = self._dx + flt.update(
-                NonHolonomic(veh.nhc_sigma, veh.nhc_sigma_up or veh.nhc_sigma).model(flt))
+            for f in self._filters() + [ref.flt for ref in self.bank.refs]:
+                f.vibration = kv
+        for f in self._filters():
+            if self._still:
+                dx = f.update(ZeroVelocity(veh.zupt_sigma).model(f))
+            elif veh.nhc:
+                dx = f.update(NonHolonomic(veh.nhc_sigma, veh.nhc_sigma_up
+                                           or veh.nhc_sigma).model(f))
+            else:
+                continue
+            if f is flt:
+                self._dx = self._dx + dx
+        self.bank.on_outage(te, self._t_last_fix)
+        if self._hyp is not None:
+            return             # no map, references or time-offset search until resolved
         if self.road_aid is not None:
             m = self.road_aid(te, flt)
             if m is not None:
                 self._dx = self._dx + m
         self.bank.maintain(te, flt)
-        self.bank.on_outage(te, self._t_last_fix)
         if flt.layout.toff is not None:
             self._check_time_offset(te)
 
@@ -740,9 +796,12 @@ class Navigator:
             self._declination = float(declination_inclination(
                 earth_field_n(flt.ins.lat, flt.ins.lon, flt.ins.h))[0])
         hdg = float(magnetic_heading(mag_b, roll, pitch, self._declination))
-        m = Heading(hdg, veh.mag_heading_sigma).model(flt)
-        if flt.nis(m) <= self._gate_v:
-            self._dx = self._dx + flt.update(m)
+        for f in self._filters():
+            m = Heading(hdg, veh.mag_heading_sigma).model(f)
+            if f.nis(m) <= self._gate_v:
+                dx = f.update(m)
+                if f is flt:
+                    self._dx = self._dx + dx
 
     # ------------------------------------------------------------------ one fix
     def _process_fix(self, fx: _Fix):
@@ -755,6 +814,23 @@ class Navigator:
         if self._fix_dt:
             self.bank.fix_dt = self._fix_dt_median
         v = self.bank.judge(flt, mh, fx.t, (fx.lat, fx.lon))
+        if self._hyp is not None:
+            # the heading hypotheses: the bank judges the fix on M (its χ² gate and its
+            # episodes: outliers while the heading is resolved); a plain "used" goes into
+            # every hypothesis, anything more (a restart, a run's velocity) to M alone
+            plain = (v.reset_to is None and v.reinit_from is None and v.widen is None
+                     and v.run_velocity is None and v.add_R is None)
+            if plain and v.apply:
+                self._hypotheses_fix(fx)
+                return
+            if plain and self.bank.episode is None:
+                self._log(fx, v.status, v.reason, v.nis, nis_v, np.nan)
+                return
+            # a fault episode: no fix will resolve the heading while it lasts, and the dead
+            # reckoning's envelope must be the whole sum's (its covariance about M), not M's
+            self._collapse_hypotheses(fx.t)
+            flt = self.flt
+            m = PositionFix(fx.t, fx.lat, fx.lon, fx.h, fx.sigma_h, fx.sigma_v).model(flt)
         if v.reset_to is not None:
             self._reset_to(v.reset_to, v.excluded_since)
             m = PositionFix(fx.t, fx.lat, fx.lon, fx.h, fx.sigma_h, fx.sigma_v).model(self.flt)
@@ -784,9 +860,12 @@ class Navigator:
             if nis_v <= self._gate_v and v.add_R is None:
                 self._dx = self._dx + flt.update(m)
             else:
+                # the fault's variance is horizontal: a fix fused with it gives no height
                 self._dx = self._dx + flt.update(m.rows([0, 1]))
                 status = FixStatus.DEGRADED
-                reason = (reason + "; " if reason else "") + f"height rejected (NIS {nis_v:.3g})"
+                if nis_v > self._gate_v:
+                    reason = ((reason + "; " if reason else "")
+                              + f"height rejected (NIS {nis_v:.3g})")
             self._t_last_fused = fx.t
             if self.adapter is not None and self.bank.episode is None:
                 self.adapter.on_fix(flt, v.nis, 2)
@@ -798,6 +877,71 @@ class Navigator:
             if nis_vel <= gate and (v.apply or self.bank.episode is not None):
                 self._dx = self._dx + flt.update(mv)
         self._log(fx, status, reason, v.nis, nis_v, nis_vel)
+
+    def _fuse_plain(self, f, fx):
+        """A fix into one filter with its own χ² gates (no bank): ``(horizontal NIS, det of
+        its covariance, used, vertical NIS, velocity NIS)``."""
+        m = PositionFix(fx.t, fx.lat, fx.lon, fx.h, fx.sigma_h, fx.sigma_v).model(f)
+        S3 = m.H @ f.P @ m.H.T + m.R
+        Sh = S3[:2, :2]
+        nis = float(m.r[:2] @ np.linalg.solve(Sh, m.r[:2]))
+        nis_v = float(m.r[2] ** 2 / S3[2, 2])
+        used = nis <= self._hyp.gate
+        nis_vel = np.nan
+        dx = np.zeros(f.nx)
+        if used:
+            dx = dx + f.update(m if nis_v <= self._gate_v else m.rows([0, 1]))
+            if fx.velocity_n is not None and self.cfg.gnss.use_velocity:
+                mv = VelocityFix(fx.t, fx.velocity_n, fx.sigma_vel, fx.sigma_vel_up).model(f)
+                nis_vel = f.nis(mv)
+                if nis_vel <= (self._gate_vel3 if len(mv.r) == 3 else self._gate_vel2):
+                    dx = dx + f.update(mv)
+        if f is self.flt:
+            self._dx = self._dx + dx
+        return nis, float(np.linalg.det(Sh)), used, nis_v, nis_vel
+
+    def _hypotheses_fix(self, fx):
+        """A fix while the start's heading is a Gaussian sum (:mod:`selfnav.ins.headings`):
+        into every hypothesis, the weights, the best one is ``M``; collapsed once resolved."""
+        hyp, m_old = self._hyp, self.flt
+        info = {}
+
+        def fuse(f):
+            nis, det, used, nis_v, nis_vel = self._fuse_plain(f, fx)
+            info[id(f)] = (nis, used, nis_v, nis_vel)
+            return nis, det, used
+
+        hyp.on_fix(fuse)
+        hyp.prune()
+        self.flt = hyp.filters[hyp.best]
+        if self.flt is not m_old:
+            # M is another hypothesis now: its innovations so far were another filter's, and
+            # the smoother's record breaks here
+            self.bank.innov = []
+            self._reset_flag = True
+        nis, used, nis_v, nis_vel = info[id(self.flt)]
+        if used:
+            self._t_last_fused = fx.t
+        w = float(np.max(hyp.weights))
+        why = (f"heading hypotheses: {len(hyp.filters)} left, the best at "
+               f"{np.degrees(hyp.deltas[hyp.best]):+.0f}° holds {w:.2f}")
+        self._log(fx, FixStatus.USED if used else FixStatus.REJECTED,
+                  why if used else f"χ² gate (NIS {nis:.3g}); {why}", nis, nis_v, nis_vel)
+        if hyp.resolved(fx.t):
+            self._collapse_hypotheses(fx.t)
+
+    def _collapse_hypotheses(self, t):
+        """The heading resolved (or given up on): M is the best hypothesis with the covariance
+        of the whole sum about it; the fault bank's clock of healthy fixes starts now."""
+        hyp = self._hyp
+        self.start_info["heading_resolved_s"] = float(t)
+        self.start_info["heading_resolved_weight"] = float(np.max(hyp.weights))
+        self.flt = hyp.collapse()
+        self._hyp = None
+        self._reset_flag = True
+        self.bank.innov = []
+        if self.bank.t_healthy is not None:
+            self.bank.t_healthy = max(self.bank.t_healthy, float(t))
 
     def _reinit_from(self, track, fx):
         """The GNSS branch won (:meth:`selfnav.ins.hypotheses.FaultBank._ins_lost`): position
@@ -834,8 +978,9 @@ class Navigator:
         Pm[IR, IR] = np.diag([s_p**2 * 4, s_p**2 * 4, fx.sigma_v**2])
         Pm[IV, IV] = np.diag([(2 * s_v) ** 2, (2 * s_v) ** 2, 1.0])
         att_s = cfg.init.att_sigma
-        Pm[IP, IP] = np.diag([att_s[0] ** 2, att_s[1] ** 2,
-                              (s_v / max(speed, 1e-3)) ** 2 + att_s[2] ** 2])
+        Pm[IP, IP] = np.diag([att_s[0] ** 2, att_s[1] ** 2, att_s[2] ** 2])
+        # the heading is the course of the fixes' velocity: one error with its cross part
+        set_course_heading(flt, np.eye(2) * (2 * s_v) ** 2, att_s[2])
         self.bank.refs = []
         self._reset_flag = True
         self._t_last_fused = fx.t
@@ -893,6 +1038,8 @@ class Navigator:
         if tau is None:
             tau, pos, vel, C_nb = (flt.t_true, np.array([flt.ins.lat, flt.ins.lon, flt.ins.h]),
                                    flt.ins.velocity_n, flt.ins.C_nb)
+            if self._hyp is not None:          # the heading hypotheses' mean
+                pos, vel = self._hyp.mean_point()
         st = np.zeros(PACK_SIZE)
         st[0:3] = pos
         st[PACK["vel"]] = vel
@@ -902,8 +1049,15 @@ class Navigator:
         st[PACK["lever"]] = flt.lever_b
         dt_row = T - tau
         P = flt.P
-        self._rows.append((T, dt_row, st, np.sqrt(np.maximum(np.diag(P)[:9], 0.0)),
-                           _STATUS_CODE[self._status(T)], self.bank.protection_level(flt, T),
+        sig = np.sqrt(np.maximum(np.diag(P)[:9], 0.0))
+        if self._hyp is None:
+            C_out = output_covariance(P, flt.layout, C_nb, vel, flt.lever_b)
+        else:      # the whole Gaussian sum about its mean
+            C_out = self._hyp.output_covariance()
+        sig[IR] = np.sqrt(np.maximum(np.diag(C_out), 0.0))
+        self._rows.append((T, dt_row, st, sig,
+                           _STATUS_CODE[self._status(T)],
+                           self.bank.protection_level(flt, T, C_out[:2, :2]),
                            len(self._rec["t"]) - 1 if self.smoother else -1,
                            len(self._segments), flt.layout.lever is not None))
 
@@ -931,15 +1085,23 @@ class Navigator:
                             decisions=tuple(self._decisions))
         flt = self.flt
         lat, lon, h = flt.ins.lat, flt.ins.lon, flt.ins.h
+        vel = flt.ins.velocity_n
+        if self._hyp is not None:              # the heading hypotheses' mean
+            (lat, lon, h), vel = self._hyp.mean_point()
         if flt.layout.lever is not None:
             lat, lon, h = offset_to_geodetic(lat, lon, h, flt.ins.C_nb.T @ flt.lever_b)
         roll, pitch, hdg = att.euler_from_dcm_nb(flt.ins.C_nb)
-        s = np.sqrt(np.maximum(np.diag(flt.P)[:3], 0.0))
+        if self._hyp is None:
+            C_out = output_covariance(flt.P, flt.layout, flt.ins.C_nb, flt.ins.velocity_n,
+                                      flt.lever_b)
+        else:
+            C_out = self._hyp.output_covariance()
+        s = np.sqrt(np.maximum(np.diag(C_out), 0.0))
         t = flt.t_true
         return NavState(t, math.degrees(float(lat)), math.degrees(float(lon)), float(h),
-                        flt.ins.velocity_n, math.degrees(roll), math.degrees(pitch),
+                        vel, math.degrees(roll), math.degrees(pitch),
                         math.degrees(hdg) % 360.0, float(np.hypot(s[0], s[1])),
-                        self._status(t), self.bank.protection_level(flt, t), s,
+                        self._status(t), self.bank.protection_level(flt, t, C_out[:2, :2]), s,
                         tuple(self._decisions))
 
     @property
@@ -964,6 +1126,9 @@ class Navigator:
         for te, kind, _, payload in self._events:
             if kind == _KIND_FIX:
                 self.log["reason"][payload.index] = "after the last IMU sample"
+        if self._hyp is not None:
+            self.flt = self._hyp.collapse()
+            self._hyp = None
         self.bank.finish(t)
 
     def result(self, smooth: bool = False) -> NavigatorResult:
@@ -1005,6 +1170,9 @@ class Navigator:
                     e[IR] += e[IV] * (T[i] - dtr[i] - t_rec[k])
                     st[i] = apply_error(st[i], e, lay)
                     sig[i] = np.sqrt(np.maximum(np.diag(Ps[k])[:9], 0.0))
+                    C_out = output_covariance(Ps[k], lay, st[i, PACK["C"]].reshape(3, 3),
+                                              st[i, PACK["vel"]], st[i, PACK["lever"]])
+                    sig[i, IR] = np.sqrt(np.maximum(np.diag(C_out), 0.0))
             smoothed = True
         # the row time: first order from the sample's state (under one IMU sample)
         vel = st[:, PACK["vel"]]
