@@ -9,8 +9,8 @@ import pytest
 
 from selfnav.cli import main
 from selfnav.io.csvio import read_table, write_csv
-from selfnav.roads.hmm import (HmmMatcher, neighbour_points, stationary_weight,
-                               transition_route_distance)
+from selfnav.roads.fixes import adjacent_fixes
+from selfnav.roads.hmm import HmmMatcher, neighbour_points, transition_route_distance
 from selfnav.roads.routes import node_distances
 from selfnav.roads.graph import (Candidates, packaged_map, project_points_to_segments,
                                  project_to_polyline)
@@ -88,31 +88,42 @@ def test_route_distances_agree_with_networkx(maps):
 def test_viterbi_and_posterior_agree_with_brute_force(maps, seed):
     """The numba kernels (transitions on the fly, windows of 2 fixes, cached route rows, pruned
     pairs, stored weights) find the path an exhaustive search finds over the model written out
-    in numpy (route distances by :func:`transition_route_distance`, the cut, a break at every
-    transition with log p ``log_break``, the robust emission), and ``match_p`` is the
-    posterior the enumeration of every path gives."""
+    in numpy (route distances by :func:`transition_route_distance`, the detour against the
+    straight line between the two road points, the shared error's residual term, the cut, a
+    break at every transition with log p ``log_break``, the robust emission), and the
+    posterior of every candidate is the one the enumeration of every path gives."""
     g = maps["kotka_karhula"]
     traj, route, noisy = floating_car(g, seed, sigma=15.0, duration=300.0, period=5.0)
     t, xy = traj.t[20:26], noisy[20:26].copy()
     xy[3] += [70.0, -40.0]                     # a multipath outlier: neighbour candidates too
-    m = HmmMatcher(g, sigma=15.0, k=3, window=2)
+    m = HmmMatcher(g, sigma=15.0, k=3, window=2, error_corr=0.5, stationary_k=0.0)
     res = m.match(t, xy)
     bounds = np.array([0, len(t)])
-    off, seg, along, dist, foot, pos = m._candidates(xy, np.full(len(t), m.radius),
-                                                     neighbour_points(xy, bounds))
+    radius = np.full(len(t), m.radius)
+    ep = m._epochs(t, xy, np.full(len(t), m.sigma), bounds)
+    assert len(ep.xy) == len(t)                # (no stationary run: one epoch per fix)
+    dec = m._decode(ep, radius, np.full(len(t), m.beta), np.full(len(t), m.backtrack))
+    off, seg, along, dist, foot, pos = m._candidates(
+        xy, radius, neighbour_points(xy, bounds, radius), adjacent_fixes(xy, bounds))
+    np.testing.assert_array_equal(dec["seg"], seg)
     assert np.diff(off)[3] > 3                 # the outlier got its neighbours' roads
     query = np.repeat(np.arange(len(t)), np.diff(off))
     cand = Candidates(query, seg, along, np.zeros(len(seg)), dist, foot)
-    em = m.emission(dist, m.sigma) * stationary_weight(
-        xy, bounds, np.full(len(t), m.stationary_k * m.sigma), m.stationary_a)[query]
+    em = m.emission(dist, m.sigma)
+    r = xy[query] - foot                       # residuals, not beyond 3 σ nor for neighbours'
+    r[(np.hypot(*(xy[query] - pos).T) > 0) | (dist > 3 * m.sigma)] = np.nan
     table = {}
     for e in range(len(t) - 1):
         i, j = (a.ravel() for a in np.meshgrid(np.arange(off[e], off[e + 1]),
                                                np.arange(off[e + 1], off[e + 2]), indexing="ij"))
-        d_gc = np.hypot(*(pos[j] - pos[i]).T)
         fastest = m.max_speed * (t[e + 1] - t[e]) + 2 * m.radius
         d = transition_route_distance(g, cand, i, j, backtrack=m.backtrack, limit=np.inf)
-        lt = np.where(np.isfinite(d) & (d <= fastest), -np.abs(d - d_gc) / m.beta, -np.inf)
+        detour = np.maximum(d - np.hypot(*(foot[j] - foot[i]).T), 0.0)
+        rho = 0.5 * np.exp(-(t[e + 1] - t[e]) / m.error_tau)
+        both = np.isfinite(r[i, 0]) & np.isfinite(r[j, 0])
+        corr = np.where(both, (np.sum(r[j] ** 2, 1) - np.sum((r[j] - rho * r[i]) ** 2, 1)
+                               / (1 - rho ** 2)) / (2 * m.sigma ** 2), 0.0)
+        lt = np.where(np.isfinite(d) & (d <= fastest), -detour / m.beta + corr, -np.inf)
         lt[lt < -m.cut] = -np.inf
         table.update({(a, b): v for a, b, v in zip(i, j, lt)})
     best, best_path = -np.inf, None
@@ -126,17 +137,13 @@ def test_viterbi_and_posterior_agree_with_brute_force(maps, seed):
         logw.append(sum(em[k] for k in combo) + sum(np.logaddexp(s, m.log_break)
                                                      for s in steps))
     np.testing.assert_array_equal(res.seg, seg[list(best_path)])
-    np.testing.assert_allclose(res.along, along[list(best_path)], atol=1e-9)
+    np.testing.assert_array_equal(dec["path"], best_path)
     w = np.exp(np.asarray(logw) - max(logw))
     post = np.zeros(len(seg))
     for combo, wk in zip(paths, w):
         post[list(combo)] += wk
     post /= w.sum()
-    chosen = foot[list(best_path)]
-    _, _, d_road, _ = project_points_to_segments(chosen[query], g.xy[g.seg_u[seg]],
-                                                 g.xy[g.seg_v[seg]])
-    ref = np.bincount(query, weights=post * (d_road <= 5.0), minlength=len(t))
-    np.testing.assert_allclose(res.match_p, ref, atol=1e-4)
+    np.testing.assert_allclose(dec["post"], post, atol=1e-4)
     assert not res.matched[3] and res.moved[3] > 30.0    # the outlier is not "matched"
 
 

@@ -476,7 +476,11 @@ def read_fleet(paths, *, datum: str = "wgs84") -> Fleet:
 
 # ------------------------------------------------------------------ output
 def _fmt(values, spec, empty=""):
-    return [empty if not np.isfinite(v) else spec % v for v in values]
+    v = np.asarray(values, float)
+    ok = np.isfinite(v)
+    if ok.all():                          # Python floats format several times faster
+        return [spec % x for x in v.tolist()]
+    return [spec % x if o else empty for x, o in zip(v.tolist(), ok.tolist())]
 
 
 class FleetWriter:
@@ -543,9 +547,9 @@ class FleetWriter:
                 self._flush()
             return
         cols = [list(t_text), _fmt(lat_deg, "%.9f"), _fmt(lon_deg, "%.9f"), _fmt(h_m, "%.3f"),
-                _fmt(cross_m, "%.3f"), [str(int(w)) for w in way_id],
-                ["1" if m else "0" for m in matched], _fmt(match_p, "%.4f"),
-                [str(int(p)) for p in piece]]
+                _fmt(cross_m, "%.3f"), [str(w) for w in np.asarray(way_id, np.int64).tolist()],
+                ["1" if m else "0" for m in np.asarray(matched, bool).tolist()],
+                _fmt(match_p, "%.4f"), [str(p) for p in piece.tolist()]]
         if self.track_id:
             tid = _csv_field(str(track_id))
             cols.insert(0, [tid] * n)

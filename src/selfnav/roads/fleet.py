@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import os
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Callable, Iterable, Iterator
 
@@ -37,15 +37,17 @@ MAP_MARGIN_M = 1000.0
 class MatchParams:
     """The matcher's settings (see :class:`~selfnav.roads.hmm.HmmMatcher`). ``sigma_m=None``:
     each track's σ is estimated from its own fixes (:meth:`HmmMatcher.estimate_sigmas`) unless
-    they carry ``sigma_m``."""
+    they carry ``sigma_m``. ``error_corr=None``: the shared share of the GNSS error is
+    estimated once from all the tracks of a call (:meth:`HmmMatcher.estimate_error_corr`)."""
 
     sigma_m: float | None = None
     radius_m: float | None = None
     beta_m: float | None = None
+    error_corr: float | None = None
 
     def matcher(self, graph: RoadGraph) -> HmmMatcher:
         return HmmMatcher(graph, sigma=self.sigma_m or 10.0, radius=self.radius_m,
-                          beta=self.beta_m)
+                          beta=self.beta_m, error_corr=self.error_corr or 0.0)
 
 
 @dataclass
@@ -116,12 +118,15 @@ def swapped_columns(g: RoadGraph, gnss_list, sample=20_000) -> bool:
     return bool(np.mean(inside_map(g, lon, lat)) > 0.5)
 
 
-def _failed(track_id, gnss, g):
-    """Why a track cannot be matched, or None; and its local positions."""
+def _failed(track_id, gnss, g, xy=None):
+    """Why a track cannot be matched, or None; and its local positions (``xy``: already
+    converted)."""
     if gnss is None or len(gnss.t) < 2:
         return f"track '{track_id}': fewer than two fixes", None, 0
-    x, y = g.to_local(gnss.lat, gnss.lon)
-    inside = inside_map(g, gnss.lat, gnss.lon)
+    x, y = g.to_local(gnss.lat, gnss.lon) if xy is None else xy.T
+    xmin, ymin, xmax, ymax = g.bounds()
+    m = MAP_MARGIN_M
+    inside = (x > xmin - m) & (x < xmax + m) & (y > ymin - m) & (y < ymax + m)
     if not inside.any():
         return (f"track '{track_id}': none of the {len(x)} fixes lies within "
                 f"{MAP_MARGIN_M / 1e3:.0f} km of the map {g.name}: another area, or a "
@@ -129,34 +134,68 @@ def _failed(track_id, gnss, g):
     return None, np.column_stack([x, y]), int((~inside).sum())
 
 
-def match_batch(matcher: HmmMatcher, items, *, auto_sigma: bool = True,
-                route: bool = False) -> list:
-    """Match a list of ``(track_id, GnssData)`` in one pass of the matcher
-    (:meth:`HmmMatcher.match_many`); a failing track does not affect the others.
-
-    ``auto_sigma``: each track's σ (where its fixes give none) is estimated from its fixes."""
-    t0 = time.perf_counter()
+def _prepare(matcher: HmmMatcher, items, auto_sigma: bool):
+    """The tracks of ``items`` that can be matched: ``(out, ok, xys, sig, track_sigma,
+    outside)`` -- ``out`` with the failed tracks filled in, the indices of the others, their
+    local positions, their per-fix σ (or None) and σ."""
     g = matcher.graph
     out = [None] * len(items)
     ok, xys, outside = [], [], {}
+    # every track's fixes to local metres in one projection call (one per track costs more)
+    use = [gd is not None and len(gd.t) >= 2 for _, gd in items]
+    if any(use):
+        x, y = g.to_local(np.concatenate([gd.lat for (_, gd), u in zip(items, use) if u]),
+                          np.concatenate([gd.lon for (_, gd), u in zip(items, use) if u]))
+        sizes = [len(gd.t) for (_, gd), u in zip(items, use) if u]
+        parts = iter(np.split(np.column_stack([x, y]), np.cumsum(sizes)[:-1]))
     for k, (tid, gd) in enumerate(items):
-        err, xy, n_out = _failed(tid, gd, g)
+        err, xy, n_out = _failed(tid, gd, g, next(parts) if use[k] else None)
         if err:
             out[k] = TrackMatch(tid, error=err, outside=n_out)
         else:
             ok.append(k)
             xys.append(xy)
             outside[k] = n_out
+    sig = [items[k][1].sigma_m for k in ok]
+    track_sigma = None
+    if ok and auto_sigma:
+        est = matcher.estimate_sigmas([xy for xy, s in zip(xys, sig) if s is None]) \
+            if any(s is None for s in sig) else []
+        it = iter(est)
+        track_sigma = [next(it) if s is None else float(np.nanmedian(s)) if
+                       np.isfinite(s).any() else matcher.sigma for s in sig]
+    return out, ok, xys, sig, track_sigma, outside
+
+
+def fleet_error_corr(matcher: HmmMatcher, items, *, auto_sigma: bool = True) -> float:
+    """The shared share of the GNSS error of the tracks ``items`` (``(track_id, GnssData)``),
+    estimated once over all of them (:meth:`HmmMatcher.estimate_error_corr`; each track's σ
+    estimated from its fixes with ``auto_sigma``, else the matcher's)."""
+    use = [gd for _, gd in items if gd is not None and len(gd.t) >= 2]
+    if not use:
+        return 0.0
+    x, y = matcher.graph.to_local(np.concatenate([gd.lat for gd in use]),
+                                  np.concatenate([gd.lon for gd in use]))
+    xy = np.split(np.column_stack([x, y]), np.cumsum([len(gd.t) for gd in use])[:-1])
+    return matcher.estimate_error_corr([(gd.t, p, gd.sigma_m) for gd, p in zip(use, xy)],
+                                       None if auto_sigma else [matcher.sigma] * len(use))
+
+
+def match_batch(matcher: HmmMatcher, items, *, auto_sigma: bool = True,
+                route: bool = False, auto_corr: bool = False) -> list:
+    """Match a list of ``(track_id, GnssData)`` in one pass of the matcher
+    (:meth:`HmmMatcher.match_many`); a failing track does not affect the others.
+
+    ``auto_sigma``: each track's σ (where its fixes give none) is estimated from its fixes.
+    ``auto_corr``: the shared share of the GNSS error is estimated from these tracks (else
+    the matcher's)."""
+    t0 = time.perf_counter()
+    g = matcher.graph
+    out, ok, xys, sig, track_sigma, outside = _prepare(matcher, items, auto_sigma)
     if ok:
-        sig = [None if items[k][1].sigma_m is None else items[k][1].sigma_m for k in ok]
-        if auto_sigma:
-            est = matcher.estimate_sigmas([xy for xy, s in zip(xys, sig) if s is None]) \
-                if any(s is None for s in sig) else []
-            it = iter(est)
-            track_sigma = [next(it) if s is None else float(np.nanmedian(s)) if
-                           np.isfinite(s).any() else matcher.sigma for s in sig]
-        else:
-            track_sigma = None
+        if auto_corr:
+            matcher = matcher.with_error_corr(matcher.estimate_error_corr(
+                [(items[k][1].t, xy, s) for k, xy, s in zip(ok, xys, sig)], track_sigma))
         try:
             results = matcher.match_many([(items[k][1].t, xy, s) for k, xy, s in
                                           zip(ok, xys, sig)], track_sigma)
@@ -189,15 +228,18 @@ def match_batch(matcher: HmmMatcher, items, *, auto_sigma: bool = True,
 
 
 def match_track(matcher: HmmMatcher, track_id: str, gnss: GnssData, *, auto_sigma=True,
-                route: bool = False) -> TrackMatch:
-    """Match one track; failures come back as ``error`` (one line naming the track)."""
-    return match_batch(matcher, [(track_id, gnss)], auto_sigma=auto_sigma, route=route)[0]
+                route: bool = False, auto_corr: bool = True) -> TrackMatch:
+    """Match one track; failures come back as ``error`` (one line naming the track).
+    ``auto_corr``: the shared share of the GNSS error is estimated from the track itself."""
+    return match_batch(matcher, [(track_id, gnss)], auto_sigma=auto_sigma, route=route,
+                       auto_corr=auto_corr)[0]
 
 
 def match_chunk(roads, params: MatchParams, items, route: bool = False) -> list:
     """Match a list of ``(track_id, GnssData)`` with this process's matcher (one Dask task)."""
     m = process_matcher(roads, params)
-    return match_batch(m, items, auto_sigma=params.sigma_m is None, route=route)
+    return match_batch(m, items, auto_sigma=params.sigma_m is None, route=route,
+                       auto_corr=params.error_corr is None)
 
 
 def chunk_tracks(items, chunk_fixes: int):
@@ -265,6 +307,12 @@ def match_tracks(items: Iterable, roads, params: MatchParams = MatchParams(), *,
     if workers is not None and workers < 0:
         raise SelfnavError(f"--workers must be 0 (in this process) or more (got {workers})")
     total = sum(0 if gd is None else len(gd.t) for _, gd in items)
+    if params.error_corr is None and items:
+        # the shared share of the GNSS error, once for the whole fleet: every chunk, in this
+        # process or on Dask, matches with the same model
+        m = process_matcher(graph if graph is not None else roads, params)
+        params = replace(params, error_corr=fleet_error_corr(m, items,
+                                                              auto_sigma=params.sigma_m is None))
     if client is None and scheduler is None and (
             workers == 0 or (workers is None and (total < auto_min_fixes or len(items) < 2))):
         yield from _in_process(items, graph if graph is not None else roads, params, route,
@@ -285,7 +333,8 @@ def _in_process(items, roads, params, route, progress, run, batch_fixes=4096):
     run.startup_s = time.perf_counter() - t0
     t1 = time.perf_counter()
     for chunk in chunk_tracks(items, batch_fixes):
-        for r in match_batch(m, chunk, auto_sigma=params.sigma_m is None, route=route):
+        for r in match_batch(m, chunk, auto_sigma=params.sigma_m is None, route=route,
+                             auto_corr=params.error_corr is None):
             if progress:
                 progress(1)
             yield r

@@ -373,14 +373,19 @@ class RoadGraph:
         if self._csr is None:
             from scipy.sparse import csr_matrix
 
-            # a duplicate (u, v) pair keeps the shorter segment
-            order = np.lexsort((self.seg_len, self.seg_v, self.seg_u))
-            u, v, L = self.seg_u[order], self.seg_v[order], self.seg_len[order]
-            first = np.ones(len(u), bool)
-            first[1:] = (u[1:] != u[:-1]) | (v[1:] != v[:-1])
-            self._csr = csr_matrix((np.maximum(L[first], 1e-6), (u[first], v[first])),
-                                   shape=(self.n_nodes, self.n_nodes))
+            self._csr = csr_matrix(self.csr_arrays(), shape=(self.n_nodes, self.n_nodes))
         return self._csr
+
+    def csr_arrays(self):
+        """``(data, indices, indptr)`` of :attr:`csr` (segment lengths, end nodes, row starts)
+        in plain numpy, without importing scipy: a duplicate ``(u, v)`` pair keeps the shorter
+        segment; lengths are at least 1e-6 m."""
+        order = np.lexsort((self.seg_len, self.seg_v, self.seg_u))
+        u, v, L = self.seg_u[order], self.seg_v[order], self.seg_len[order]
+        first = np.ones(len(u), bool)
+        first[1:] = (u[1:] != u[:-1]) | (v[1:] != v[:-1])
+        indptr = np.concatenate([[0], np.cumsum(np.bincount(u[first], minlength=self.n_nodes))])
+        return np.maximum(L[first], 1e-6), v[first].astype(np.int64), indptr.astype(np.int64)
 
     def subgraph(self, nodes, name=None) -> "RoadGraph":
         """The graph induced by a set of node indices (projection centre kept)."""

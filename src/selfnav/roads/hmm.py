@@ -4,30 +4,45 @@ posteriors (DESIGN §7, issues 5, 14 and 21).
 The model follows Newson & Krumm (2009, "Hidden Markov map matching through noise and
 sparseness"), with what real fleets need (issue 21):
 
-* **states** at each fix are road candidates: the closest point of each nearby road (one per
+* **epochs**: the fixes of a track, except that a *stationary run* -- consecutive fixes each
+  within 3 σ of the run's mean so far, a car standing still -- is one epoch at the mean of its
+  fixes (:func:`selfnav.roads.fixes.stationary_runs`): a standing car has one position, and
+  its fixes repeat one correlated error that, counted N times, would outweigh the road it
+  drove in on. Each fix gets its run's road position (a run whose fixes move along the road,
+  a car crawling in a queue, a fitted constant speed along it);
+* **states** at each epoch are road candidates: the closest point of each nearby road (one per
   OSM way and direction) within a search radius, from
-  :meth:`selfnav.roads.graph.RoadGraph.candidates` (the nearest always among them); a fix with no road inside the radius gets its nearest road,
-  so that *every* fix is matched; a fix far from where its neighbours put it (multipath) also
-  gets the roads near that point (:meth:`HmmMatcher._candidates`);
+  :meth:`selfnav.roads.graph.RoadGraph.candidates` (the nearest always among them); a fix far
+  from where its neighbours put it (multipath) also gets the roads near that point and near
+  its two neighbours (:meth:`HmmMatcher._candidates`);
 * **emission**: Gaussian in the distance between fix and candidate with a small wide part
-  (:meth:`HmmMatcher.emission`), σ the fix's ``sigma_m`` (or the track's); a stationary run's
-  fixes weigh 1/N (:func:`stationary_weight`);
-* **transition**: exponential in the difference between the route distance over the directed
-  graph (one-ways respected) and the straight-line distance between the two fixes,
-  ``log p = -|d_route - d_gc| / β``; a small backwards move on the same road (≤ ``backtrack``
-  metres, a stopped car in noise) counts as its length; transitions faster than ``max_speed``
-  are impossible;
-* **breaks**: from any candidate to any candidate of the next fix, ``log p = LOG_BREAK``:
+  (:meth:`HmmMatcher.emission`), σ the fix's ``sigma_m`` (or the track's);
+* **transition**: exponential in the *detour* the route makes between the two road points,
+  ``log p = -(d_route - |foot_j - foot_i|) / β`` -- the route distance over the directed
+  graph (one-ways respected) against the straight line between the two road points, not
+  between the two noisy fixes (Newson & Krumm's ``d_gc``), so that noise between the fixes of
+  a slow car is no reason to change roads; a small backwards move on the same road (≤
+  ``backtrack`` metres) counts as its length; transitions faster than ``max_speed`` are
+  impossible;
+* **correlated error**: part of a GNSS error is shared by consecutive fixes (``error_corr``,
+  decaying as ``exp(-dt/τ)``); each transition also carries the log ratio of the second fix's
+  residual (fix minus road point) given the first's to its residual alone, so a road that
+  needs the error to jump between two fixes loses to one that needs the same error twice.
+  :meth:`HmmMatcher.estimate_error_corr` estimates it from a fleet's fixes
+  (:mod:`selfnav.roads.fleet` does, once per call);
+* **breaks**: from any candidate to any candidate of the next epoch, ``log p = LOG_BREAK``:
   where no transition is possible or plausible (candidates the map does not connect, a route
   much longer than the displacement) the chain breaks and restarts, each piece matched on its
   own; a time gap over ``max_gap`` (or a new track) allows only a break;
-* **match_p**: the forward-backward posterior that the chosen road point is on the driven
-  road; **matched**: the match is plausible (:class:`MatchResult`).
+* **match_p**: the probability that the matched position is on the driven route, from the
+  forward-backward posterior, calibrated (:mod:`selfnav.roads.posterior`); **matched**: the
+  match is plausible (:class:`MatchResult`).
 
 Route distances come from a :class:`~selfnav.roads.routes.RouteCache` (bounded Dijkstra per
 candidate end node, kept and reused across fixes and tracks); the forward pass is one numba
-kernel that computes each transition on the fly and stores only the weights it used (for the
-backward pass), so memory is O(N k) plus those. Long tracks are processed in windows.
+kernel (:mod:`selfnav.roads.viterbi`) that computes each transition on the fly and stores only
+the weights it used (for the backward pass), so memory is O(N k) plus those. Long tracks are
+processed in windows.
 
 A GNSS-only matcher cannot hold the road through long outlier windows (DESIGN §7): the
 inertial prediction is what does (the navigator). :func:`transition_route_distance` and the
@@ -38,11 +53,56 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass
 
-import numba
 import numpy as np
 
-from selfnav.roads.graph import Candidates, RoadGraph, project_points_to_segments
-from selfnav.roads.routes import RouteCache, route_gap
+from selfnav.roads import viterbi
+from selfnav.roads.fixes import (adjacent_fixes, crawl_positions, error_correlation,
+                                 neighbour_points, stationary_runs)
+from selfnav.roads.graph import RoadGraph
+from selfnav.roads.grid import nearest_distance
+from selfnav.roads.posterior import match_probability, scatter_sigma
+from selfnav.roads.routes import (RouteCache, RouteDistances,  # noqa: F401 (API)
+                                   transition_route_distance)
+
+#: Lowest GNSS σ a track's fixes are estimated to have, m (:meth:`HmmMatcher.estimate_sigmas`).
+SIGMA_MIN_M = 3.0
+#: Log probability of a break (the chain restarts: a connection the map lacks, a jump no road
+#: explains) at each transition.
+LOG_BREAK = -20.0
+#: Share of fixes from the wide (multipath) part of the emission, and its σ (m; at least 3σ).
+OUTLIER_P = 0.001
+OUTLIER_SIGMA_M = 100.0
+#: A fix is flagged ``matched`` when its ``match_p`` is at least MATCHED_P, its distance to the
+#: road at most MATCHED_GATE σ, and it is not alone in its piece of chain.
+MATCHED_P = 0.97
+MATCHED_GATE = 3.0
+#: ... and never farther than this from its road, m (a track whose fixes lie 100 m from every
+#: road gets a σ estimate of 50 m: its match is not plausible, whatever the σ says).
+MATCHED_MAX_M = 30.0
+#: ... and σ in that test at most SCATTER_K times the scatter of the track's fixes across their
+#: roads (:func:`scatter_sigma`; the shared part of the error does not show in it).
+SCATTER_K = 2.0
+#: Roads near the neighbours' interpolation (and near each neighbour) a far-off fix gets as
+#: candidates besides its own.
+K_NEIGHBOUR = 4
+#: The posterior sums use every log probability divided by this (1: the model's posterior);
+#: the Viterbi path does not depend on it.
+TEMPERATURE = 1.0
+#: A fix within STATIONARY_K σ of the mean of the run before it continues a stationary run.
+STATIONARY_K = 3.0
+#: Candidates whose road points lie this close (m) count as the same road for ``match_p``.
+SAME_ROAD_M = 5.0
+#: Correlation time of the shared part of the GNSS error, s.
+ERROR_TAU_S = 60.0
+#: The shared share the matcher uses is this times :func:`~selfnav.roads.fixes.error_correlation`
+#: (which sees only the part across the road; chosen on the tuning fleets), at most
+#: ERROR_CORR_MAX.
+ERROR_CORR_SCALE = 2.0
+ERROR_CORR_MAX = 0.9
+#: Calibration of ``match_p`` (:mod:`selfnav.roads.posterior`): ``a``, ``b`` of the logistic map
+#: of the posterior's log odds, fitted on the tuning fleets (benchmarks/bench_mapmatch.py
+#: ``calibrate``, seed 1).
+MATCH_P_AB = (0.34, 3.0)
 
 
 @dataclass
@@ -76,11 +136,13 @@ class MatchResult:
         The GNSS σ the track was matched with where its fixes give none, m.
     matched : (N,) bool
         The match is plausible: ``match_p`` at least :data:`MATCHED_P`, the fix within
-        :data:`MATCHED_GATE` σ of the road, and the fix not alone in its piece of chain.
+        :data:`MATCHED_GATE` σ of the road (σ no larger than :data:`SCATTER_K` times the
+        scatter of the track's fixes across their roads, and never beyond
+        :data:`MATCHED_MAX_M`), and the fix not alone in its piece of chain.
     match_p : (N,) float
-        Posterior probability (forward-backward over the same model, breaks included) that the
-        chosen road position is on the driven road: the posterior mass of the candidates whose
-        road segment passes within :data:`SAME_ROAD_M` of it.
+        Probability that the matched position is on the driven route: from the posterior
+        (forward-backward over the same model, breaks included) of the candidates whose road
+        passes within :data:`SAME_ROAD_M` of it, calibrated (:mod:`selfnav.roads.posterior`).
     piece : (N,) int
         Piece of chain (0, 1, ... at each break).
     """
@@ -133,335 +195,22 @@ class MatchResult:
         }
 
 
-class RouteDistances:
-    """Route distances from a fixed set of source nodes (a thin view of a :class:`RouteCache`
-    that the vectorized :func:`transition_route_distance` uses)."""
+@dataclass
+class _Epochs:
+    """The fixes of a batch of tracks grouped into epochs (a stationary run is one)."""
 
-    def __init__(self, graph: RoadGraph, sources, limit=np.inf, cache: RouteCache | None = None):
-        self.sources = np.asarray(sources, np.int64)
-        self.limit = float(limit)
-        self.cache = cache or RouteCache(graph)
-
-    def row_of(self, k):
-        """Row of source number ``k`` of the array given at construction."""
-        return np.asarray(k, np.int64)
-
-    def lookup(self, rows, dst):
-        """Distance from source row ``rows`` to node ``dst`` (inf beyond the limit)."""
-        return self.cache.lookup(self.sources[rows], dst, self.limit)
-
-
-def transition_route_distance(graph: RoadGraph, cand: Candidates, i, j, *, backtrack=15.0,
-                              limit=np.inf, distances: RouteDistances | None = None):
-    """Route distance from candidate ``i`` to candidate ``j`` (arrays of candidate indices).
-
-    Forward along the directed graph: rest of segment ``i``, shortest path between the
-    segments, start of segment ``j``. A move backwards shorter than ``backtrack`` metres
-    (noise on a stopped or slow vehicle) counts as its length.
-
-    This is the vectorized (numpy) form of the transition the matcher's numba kernel computes
-    (the tests hold one against the other); an INS-driven matcher can reuse it. ``distances``
-    (a :class:`RouteDistances` built on ``graph.seg_v[cand.seg]``) is reused when given.
-    """
-    if distances is None:
-        distances = RouteDistances(graph, graph.seg_v[cand.seg], max(limit, backtrack))
-    si, sj = cand.seg[i], cand.seg[j]
-    ai, aj = cand.along[i], cand.along[j]
-    Li, Lj = graph.seg_len[si], graph.seg_len[sj]
-    same = si == sj
-    fwd_gap = distances.lookup(distances.row_of(i), graph.seg_u[sj])
-    d_fwd = np.where(same & (aj >= ai), aj - ai, (Li - ai) + fwd_gap + aj)
-    if backtrack > 0:
-        back_gap = RouteDistances(graph, graph.seg_v[sj], backtrack, distances.cache).lookup(
-            np.arange(len(sj)), graph.seg_u[si])
-        d_back = np.where(same & (aj < ai), ai - aj, (Lj - aj) + back_gap + ai)
-        d_fwd = np.where(d_back <= backtrack, np.minimum(d_fwd, d_back), d_fwd)
-    return d_fwd
-
-
-@numba.njit(cache=True)
-def _epoch_step(t, off, seg, along, foot, pos, lim, fastest, seg_u, seg_v, seg_len,
-                cache_arrays, beta, backtrack, cut, gap, scratch, stamp, score, back, alpha,
-                log_break, pb, inv_temp, pw, pi, pj, k):  # pragma: no cover - numba
-    """One step of :func:`_forward`, epoch ``t`` to ``t+1``: the transitions computed on the
-    fly, the Viterbi scores and back-pointers and the forward sums of epoch ``t+1`` (before
-    its emissions) updated, the transition weights stored from ``pw[k]`` on; returns the new
-    ``k``.
-
-    The route distance of a transition (the scalar form of :func:`transition_route_distance`,
-    forward gap cut at ``lim``): the end node of each candidate segment of epoch ``t`` is a
-    source, the start nodes of epoch ``t+1`` the targets; each source's cached row (in distance
-    order) is scanned once up to ``lim`` into a small source × target table. A route is never
-    shorter than the straight line between its ends, so a pair whose bound
-    ``max(0, |foot_j - foot_i| - d_gc)/β`` passes ``cut`` is no transition without a look-up
-    (it would lose to a break by more than ``cut - |log p_break|``); so is a pair whose bound
-    can beat neither the best Viterbi score of ``j`` so far nor add to its sum more than
-    1e-4 of the break's share. ``d_gc`` is the distance
-    between the positions ``pos`` of the fix as each candidate sees it: the fix itself, or for
-    a neighbour candidate (:meth:`HmmMatcher._candidates`) where its neighbours put it."""
-    row_of, row_start, row_len, pool_node, pool_dist = cache_arrays
-    tgt_stamp, tgt_slot, src_stamp, src_slot = scratch   # node-sized, stamped, never reset
-    i0, i1 = off[t], off[t + 1]
-    j0, j1 = off[t + 1], off[t + 2]
-    b_t = beta[t]
-    bt = backtrack[t + 1]
-    n_tgt = 0
-    for j in range(j0, j1):
-        u = seg_u[seg[j]]
-        if tgt_stamp[u] != stamp:
-            tgt_stamp[u] = stamp
-            tgt_slot[u] = n_tgt
-            n_tgt += 1
-    for j in range(j0, j1):
-        score[j] = log_break                 # break from the best (score max is 0)
-        back[j] = -1
-        alpha[j] = pb                        # break: from all of epoch t (alpha sums to 1)
-    la_min = np.log(1e-2 * pb)
-    n_src = 0
-    for i in range(i0, i1):
-        s_i = score[i]
-        a_i = alpha[i]
-        la_i = np.log(a_i) if a_i > 0 else -np.inf
-        if s_i < log_break and la_i < la_min:   # loses to a break, adds nothing
-            continue
-        si, ai = seg[i], along[i]
-        rest_i = seg_len[si] - ai
-        v_i = seg_v[si]
-        if src_stamp[v_i] != stamp:      # scan this source's row once per epoch
-            src_stamp[v_i] = stamp
-            src_slot[v_i] = n_src
-            for m in range(n_tgt):
-                gap[n_src, m] = np.inf
-            r = row_of[v_i]
-            found = 0
-            if r >= 0:
-                for e in range(row_start[r], row_start[r] + row_len[r]):
-                    if pool_dist[e] > lim[t] or found == n_tgt:
-                        break
-                    w = pool_node[e]
-                    if tgt_stamp[w] == stamp:
-                        gap[n_src, tgt_slot[w]] = pool_dist[e]
-                        found += 1
-            n_src += 1
-        row = src_slot[v_i]
-        for j in range(j0, j1):
-            dg = np.hypot(pos[j, 0] - pos[i, 0], pos[j, 1] - pos[i, 1])
-            excess = np.hypot(foot[j, 0] - foot[i, 0], foot[j, 1] - foot[i, 1]) - dg
-            if excess > cut * b_t:
-                continue
-            if excess > 0:
-                bound = -excess / b_t
-                if s_i + bound <= score[j] and la_i + bound * inv_temp < la_min:
-                    continue
-            sj, aj = seg[j], along[j]
-            if si == sj and aj >= ai:
-                d = aj - ai
-            else:
-                d = rest_i + gap[row, tgt_slot[seg_u[sj]]] + aj
-            if bt > 0:                   # backwards jitter on a slow or stopped car
-                if si == sj and aj < ai:
-                    db = ai - aj
-                else:
-                    rest = (seg_len[sj] - aj) + ai
-                    db = np.inf
-                    if rest <= bt and rest < d:
-                        db = rest + route_gap(row_of, row_start, row_len, pool_node,
-                                              pool_dist, seg_v[sj], seg_u[si], bt - rest)
-                if db <= bt and db < d:
-                    d = db
-            if not d <= fastest[t]:
-                continue
-            v = -abs(d - dg) / b_t
-            if v < -cut:
-                continue
-            if s_i + v > score[j]:
-                score[j] = s_i + v
-                back[j] = i
-            wv = np.exp(v * inv_temp)
-            alpha[j] += a_i * wv
-            pw[k] = wv
-            pi[k] = i - i0
-            pj[k] = j - j0
-            k += 1
-    return k
-
-
-@numba.njit(cache=True)
-def _forward(a, b, off, seg, along, foot, em, pos, forced, lim, fastest, seg_u, seg_v,
-             seg_len, cache_arrays, beta, backtrack, log_break, cut, score, back, alpha,
-             gap, scratch, stamp0, inv_temp, pw, pi, pj, pstart):  # pragma: no cover
-    """Viterbi (``score``, ``back``) and forward sums (``alpha``, linear, each epoch summing
-    to 1) over the transitions ``a -> a+1 ... b-1 -> b`` (epoch ``a`` already done). Besides
-    the road transitions, every candidate can be reached by a **break** from any candidate of
-    the epoch before, with log probability ``log_break`` (the chain restarts there: a map that
-    lacks a connection, a jump no road explains); ``forced[t]`` (a time gap, a new track)
-    allows only the break. ``back[j] = -1`` marks a break. Scores are kept near 0 (the best of
-    each epoch is subtracted).
-
-    The sums use every log probability times ``inv_temp``; the weights ``exp(inv_temp · log
-    p)`` of the road transitions are stored (``pw`` with local indices ``pi``, ``pj``; epoch
-    ``t``'s from ``pstart[t - a]``) for :func:`_backward`, which so needs no route look-up.
-    Returns the number of weights stored."""
-    pb = np.exp(log_break * inv_temp)
-    k = 0
-    for t in range(a, b):
-        i0, i1 = off[t], off[t + 1]
-        j0, j1 = off[t + 1], off[t + 2]
-        pstart[t - a] = k
-        em_max = -np.inf
-        for j in range(j0, j1):
-            em_max = max(em_max, em[j])
-        if forced[t]:
-            best_s = -np.inf
-            tot = 0.0
-            for j in range(j0, j1):
-                score[j] = em[j]
-                back[j] = -1
-                alpha[j] = np.exp((em[j] - em_max) * inv_temp)
-                tot += alpha[j]
-                best_s = max(best_s, score[j])
-            for j in range(j0, j1):
-                score[j] -= best_s
-                alpha[j] /= tot
-            continue
-        k = _epoch_step(t, off, seg, along, foot, pos, lim, fastest, seg_u, seg_v, seg_len,
-                        cache_arrays, beta, backtrack, cut, gap, scratch, stamp0 + t, score,
-                        back, alpha, log_break, pb, inv_temp, pw, pi, pj, k)
-        best_s = -np.inf
-        tot = 0.0
-        for j in range(j0, j1):
-            score[j] += em[j]
-            best_s = max(best_s, score[j])
-            alpha[j] *= np.exp((em[j] - em_max) * inv_temp)
-            tot += alpha[j]
-        for j in range(j0, j1):      # keep scores near 0 (no drift over long tracks)
-            score[j] -= best_s
-            alpha[j] /= tot
-    pstart[b - a] = k
-    return k
-
-
-@numba.njit(cache=True)
-def _backward(a, b, off, em, forced, log_break, bet, inv_temp, pw, pi, pj,
-              pstart):  # pragma: no cover - numba
-    """Backward sums (``bet``, linear, each epoch's maximum 1) over the transitions
-    ``b-1 -> b ... a -> a+1`` (epoch ``b`` already done), from the weights :func:`_forward`
-    stored: the same model."""
-    pb = np.exp(log_break * inv_temp)
-    ww = np.empty(max(1, np.max(off[a + 1:b + 2] - off[a:b + 1])))
-    for t in range(b - 1, a - 1, -1):
-        i0, i1 = off[t], off[t + 1]
-        j0, j1 = off[t + 1], off[t + 2]
-        em_max = -np.inf
-        for j in range(j0, j1):
-            em_max = max(em_max, em[j])
-        tot = 0.0
-        for j in range(j0, j1):
-            ww[j - j0] = np.exp((em[j] - em_max) * inv_temp) * bet[j]
-            tot += ww[j - j0]
-        if forced[t]:
-            for i in range(i0, i1):
-                bet[i] = 1.0
-            continue
-        for i in range(i0, i1):
-            bet[i] = pb * tot
-        for k in range(pstart[t - a], pstart[t - a + 1]):
-            bet[i0 + pi[k]] += pw[k] * ww[pj[k]]
-        mx = 0.0
-        for i in range(i0, i1):
-            mx = max(mx, bet[i])
-        for i in range(i0, i1):
-            bet[i] = bet[i] / mx if mx > 0 else 1.0
-
-
-@numba.njit(cache=True)
-def _backtrack(off, score, back):  # pragma: no cover - numba
-    """Best path: from the best candidate of the last epoch (and of the epoch before each
-    break) along the back-pointers."""
-    n = len(off) - 1
-    path = np.empty(n, np.int64)
-    t = n - 1
-    while t >= 0:
-        b0, b1 = off[t], off[t + 1]
-        k = b0
-        for m in range(b0, b1):
-            if score[m] > score[k]:
-                k = m
-        path[t] = k
-        while t > 0 and back[path[t]] >= 0:
-            path[t - 1] = back[path[t]]
-            t -= 1
-        t -= 1
-    return path
-
-
-#: Lowest GNSS σ a track's fixes are estimated to have, m (:meth:`HmmMatcher.estimate_sigmas`).
-SIGMA_MIN_M = 3.0
-#: Log probability of a break (the chain restarts: a connection the map lacks, a jump no road
-#: explains) at each transition.
-LOG_BREAK = -20.0
-#: Share of fixes from the wide (multipath) part of the emission, and its σ (m; at least 3σ).
-OUTLIER_P = 0.001
-OUTLIER_SIGMA_M = 100.0
-#: A fix is flagged ``matched`` when the posterior of its road is at least MATCHED_P, its
-#: distance to the road at most MATCHED_GATE σ, and it is not alone in its piece of chain.
-MATCHED_P = 0.7
-MATCHED_GATE = 3.0
-#: ... and never farther than this from its road, m (a track whose fixes lie 100 m from every
-#: road gets a σ estimate of 50 m: its match is not plausible, whatever the σ says).
-MATCHED_MAX_M = 30.0
-#: Roads near the neighbours' interpolation a far-off fix gets as candidates besides its own.
-K_NEIGHBOUR = 4
-#: The posterior (``match_p``) is computed with every log probability divided by this: the model
-#: treats fixes as independent, real errors are correlated over tens of seconds, so the plain
-#: posterior is overconfident. The Viterbi path does not depend on it.
-TEMPERATURE = 1.0
-#: A fix within STATIONARY_K σ of the one before continues a stationary run, whose fixes' emissions
-#: are weighted N ** -STATIONARY_A (:func:`stationary_weight`).
-STATIONARY_K = 2.0
-STATIONARY_A = 1.0
-#: Candidates whose road points lie this close (m) count as the same road for ``match_p``.
-SAME_ROAD_M = 5.0
-
-
-def neighbour_points(xy, bounds):
-    """Where its neighbours put each fix: the midpoint of the fixes before and after it (the
-    one neighbour at a track's ends; the fix itself in a track of one), within each track
-    (``bounds``: track starts and the total, as from ``np.cumsum``)."""
-    n = len(xy)
-    q = xy.copy()
-    if n < 2:
-        return q
-    first = np.zeros(n, bool)
-    last = np.zeros(n, bool)
-    first[np.asarray(bounds[:-1], np.int64)[np.asarray(bounds[:-1]) < n]] = True
-    last[np.asarray(bounds[1:], np.int64) - 1] = True
-    prev = np.vstack([xy[:1], xy[:-1]])
-    nxt = np.vstack([xy[1:], xy[-1:]])
-    prev = np.where(first[:, None], nxt, prev)
-    nxt = np.where(last[:, None], prev, nxt)
-    alone = first & last
-    q = np.where(alone[:, None], xy, 0.5 * (prev + nxt))
-    return q
-
-
-def stationary_weight(xy, bounds, step_m, power=1.0):
-    """Weight of each fix's emission: ``N ** -power`` for a fix in a stationary run of N fixes
-    (consecutive fixes of a track each within ``step_m`` m of the one before), 1 elsewhere. A
-    standing car's fixes repeat the same (correlated) error: counted as N independent looks
-    they would outweigh the road the car drove in on."""
-    n = len(xy)
-    if n < 2:
-        return np.ones(n)
-    step = np.hypot(*(xy[1:] - xy[:-1]).T) <= np.minimum(step_m[1:], step_m[:-1])
-    step[np.asarray(bounds[1:-1], np.int64) - 1] = False     # never across tracks
-    run = np.concatenate([[0], np.cumsum(~step)])            # run id of each fix
-    size = np.bincount(run)[run]
-    return size.astype(float) ** -power
+    run: np.ndarray        # epoch of each fix
+    xy: np.ndarray         # (E, 2) mean position of each epoch, m
+    sigma: np.ndarray      # (E,) m
+    t_in: np.ndarray       # (E,) time of the first fix, s
+    t_out: np.ndarray      # (E,) time of the last fix, s
+    bounds: np.ndarray     # epochs of each track: starts and the total
+    first: np.ndarray      # (E,) first fix of each epoch
 
 
 class HmmMatcher:
-    """Newson & Krumm hidden-Markov map matching of GNSS fixes to a road graph.
+    """Hidden-Markov map matching of GNSS fixes to a road graph (Newson & Krumm, with the
+    changes of the module docstring).
 
     Parameters
     ----------
@@ -470,8 +219,8 @@ class HmmMatcher:
         GNSS horizontal σ (m) where the fixes do not give one (:meth:`estimate_sigma` estimates
         it from a track, :meth:`with_sigma` gives the matcher for it).
     beta : float, optional
-        Transition scale (m); default ``max(3, sigma/2)``: with noisy fixes the straight-line
-        distance between two fixes is itself uncertain by ~σ√2.
+        Transition scale (m): a detour of β costs one unit of log probability; default
+        ``max(3, sigma/2)``.
     radius : float, optional
         Candidate search radius (m); default ``clip(4σ, 30, 200)``.
     k : int
@@ -483,21 +232,27 @@ class HmmMatcher:
     max_gap : float
         A time gap longer than this (s) restarts the chain.
     window : int
-        Fixes per processing window (candidate search and route distances); memory does not
+        Epochs per processing window (candidate search and route distances); memory does not
         grow with it beyond the window.
     cache : RouteCache, optional
         Route distances to share (a fleet on one map reuses them across tracks).
+    error_corr : float
+        Share of the GNSS error that consecutive fixes have in common (0: independent fixes;
+        :meth:`estimate_error_corr`), decaying with ``error_tau`` s.
+    calibration : (a, b) or None
+        Calibration of ``match_p`` (:mod:`selfnav.roads.posterior`); None gives the posterior
+        itself.
 
     Notes
     -----
-    The route distance between the two road nodes of a transition is searched up to
-    ``d_gc + (|log_break| + 2) β`` (``d_gc``: straight-line distance between the fixes; a
-    longer route loses to a break), and never beyond what ``max_speed`` allows in the time
-    between the fixes. Memory is O(N k) for N fixes (about 4 kB per fix with k = 16: Viterbi
-    scores, forward and backward sums, the stored transition weights) plus a bounded route
-    store. ``log_break``, ``outlier_p``, ``outlier_sigma``, ``matched_p``, ``matched_gate``,
-    ``temperature`` (of the posterior only), ``stationary_k`` and ``stationary_a``: the
-    module's constants of the same names.
+    The route distance between the two road nodes of a transition is searched up to the
+    largest straight distance between the road points of the two epochs plus
+    ``(|log_break| + 2) β`` (a longer route loses to a break), and never beyond what
+    ``max_speed`` allows in the time between them. Memory is O(N k) for N fixes (about 4 kB
+    per fix with k = 16: Viterbi scores, forward and backward sums, the stored transition
+    weights) plus a bounded route store. ``log_break``, ``outlier_p``, ``outlier_sigma``,
+    ``matched_p``, ``matched_gate``, ``temperature`` (of the posterior only) and
+    ``stationary_k``: the module's constants of the same names.
 
     Examples
     --------
@@ -510,17 +265,20 @@ class HmmMatcher:
                  cache: RouteCache | None = None, log_break=LOG_BREAK, outlier_p=OUTLIER_P,
                  outlier_sigma=OUTLIER_SIGMA_M, matched_p=MATCHED_P,
                  matched_gate=MATCHED_GATE, temperature=TEMPERATURE,
-                 stationary_k=STATIONARY_K, stationary_a=STATIONARY_A):
+                 stationary_k=STATIONARY_K, error_corr=0.0, error_tau=ERROR_TAU_S,
+                 calibration=MATCH_P_AB):
         self.graph = graph
         self.temperature = float(temperature)
         self.stationary_k = float(stationary_k)
-        self.stationary_a = float(stationary_a)
         self.log_break = float(log_break)
         self.cut = abs(self.log_break) + 2.0
         self.outlier_p = float(outlier_p)
         self.outlier_sigma = float(outlier_sigma)
         self.matched_p = float(matched_p)
         self.matched_gate = float(matched_gate)
+        self.error_corr = float(error_corr)
+        self.error_tau = float(error_tau)
+        self.calibration = None if calibration is None else tuple(map(float, calibration))
         self._given = {"beta": beta, "radius": radius, "backtrack": backtrack}
         self._set_sigma(sigma)
         self.k = int(k)
@@ -552,11 +310,19 @@ class HmmMatcher:
         m._set_sigma(sigma)
         return m
 
+    def with_error_corr(self, error_corr) -> "HmmMatcher":
+        """The same matcher for another shared share of the GNSS error."""
+        import copy
+
+        m = copy.copy(self)
+        m.error_corr = float(error_corr)
+        return m
+
     def estimate_sigma(self, xy) -> float:
         """GNSS σ of a track from its fixes: ``1.4826 × median`` distance to the nearest road
         (Newson & Krumm 2009, §4.1: the median absolute deviation of a Gaussian), within
-        [5, 50] m and rounded to 0.5 m. In a dense network the nearest road is not always the
-        driven one, so this leans low."""
+        [:data:`SIGMA_MIN_M`, 50] m and rounded to 0.5 m. In a dense network the nearest road
+        is not always the driven one, so this leans low."""
         return self.estimate_sigmas([xy])[0]
 
     def estimate_sigmas(self, tracks_xy) -> list:
@@ -564,24 +330,52 @@ class HmmMatcher:
         sizes = [len(np.atleast_2d(x)) for x in tracks_xy]
         xy = np.concatenate([np.atleast_2d(np.asarray(x, float)).reshape(-1, 2)
                              for x in tracks_xy])
-        c = self.graph.candidates(xy, 100.0, k=1, min_candidates=1, per_way=False)
-        d = np.full(len(xy), np.nan)
-        d[c.query] = c.dist
+        d = nearest_distance(self.graph.grid, xy, 16.0)     # rings from 16 m
         out = []
         for a, b in zip(np.cumsum([0] + sizes[:-1]), np.cumsum(sizes)):
-            s = 1.4826 * float(np.nanmedian(d[a:b])) if b > a else self.sigma
+            s = 1.4826 * float(np.median(d[a:b])) if b > a else self.sigma
             out.append(float(np.clip(np.round(2 * s) / 2, SIGMA_MIN_M, 50.0)))
         return out
 
-    def _candidates(self, xy, radius, q=None):
-        """Candidates of all fixes, searched window by window: ``(off, seg, along, dist, foot,
+    def estimate_error_corr(self, tracks, track_sigma=None) -> float:
+        """The shared share of the GNSS error of a set of tracks (``(t, xy, sigma)`` as for
+        :meth:`match_many`), from their fixes alone: :data:`ERROR_CORR_SCALE` times
+        :func:`~selfnav.roads.fixes.error_correlation` over consecutive fixes (not of one
+        stationary run), at most :data:`ERROR_CORR_MAX`. ``track_sigma`` None: each track's σ
+        as :meth:`estimate_sigmas` gives it (from the same nearest roads). A fleet's tracks
+        share a receiver type and a city: estimate it once over the fleet (a short track alone
+        says little: the estimate shrinks to 0)."""
+        if not tracks:
+            return 0.0
+        ts, xy, sig, bounds, _ = self._stack(tracks, track_sigma)
+        n = len(xy)
+        if n < 2:
+            return 0.0
+        c = self.graph.candidates(xy, 30.0, k=1, min_candidates=1, per_way=False)
+        near = np.searchsorted(c.query, np.arange(n))
+        if track_sigma is None:               # σ of the tracks whose fixes give none
+            for k, (a, b) in enumerate(zip(bounds[:-1], bounds[1:])):
+                if tracks[k][2] is None and b > a:
+                    s = 1.4826 * float(np.median(c.dist[near[a:b]]))
+                    sig[a:b] = float(np.clip(np.round(2 * s) / 2, SIGMA_MIN_M, 50.0))
+        run = stationary_runs(xy, bounds, self.stationary_k * sig)
+        dt = np.diff(ts)
+        forced = (run[1:] == run[:-1]) | ~(dt <= self.max_gap)
+        forced[np.asarray(bounds[1:-1], np.int64) - 1] = True      # a new track
+        r = error_correlation(xy, c.foot[near], self.graph.seg_heading[c.seg[near]], dt,
+                              forced, sig, self.error_tau)
+        return float(min(ERROR_CORR_MAX, ERROR_CORR_SCALE * r))
+
+    def _candidates(self, xy, radius, q=None, near=None):
+        """Candidates of all epochs, searched window by window: ``(off, seg, along, dist, foot,
         pos)`` (``pos``: the position of the fix the candidate stands for).
 
-        With ``q`` (one point per fix: where its neighbours put it, :func:`neighbour_points`),
-        a fix that lies more than its search radius from its ``q`` also gets the roads near
-        ``q`` (at most :data:`K_NEIGHBOUR`, foot points of ``q``, distances from the fix): a
-        multipath outlier then keeps the road its neighbours are on as a candidate, instead of
-        only the roads under the outlier."""
+        With ``q`` (one point per epoch: where its neighbours put it,
+        :func:`~selfnav.roads.fixes.neighbour_points`), an epoch that lies more than its search
+        radius from its ``q`` also gets the roads near ``q`` and near each point of ``near``
+        (its neighbours; at most :data:`K_NEIGHBOUR` each, foot points of those points,
+        distances from the fix): a multipath outlier then keeps the roads its neighbours are on
+        as candidates, instead of only the roads under the outlier."""
         n = len(xy)
         offs, segs, alongs, dists, feet, poss = [np.zeros(1, np.int64)], [], [], [], [], []
         total = 0
@@ -591,22 +385,20 @@ class HmmMatcher:
                                       per_way=True)
             qs, ss, als, ds, fs = c.query, c.seg, c.along, c.dist, c.foot
             ps = xy[sl][qs]
-            if q is not None:
-                far = np.flatnonzero(np.hypot(*(xy[sl] - q[sl]).T) > radius[sl])
-                if len(far):
-                    e = self.graph.candidates(q[sl][far], radius[sl][far], k=K_NEIGHBOUR,
-                                              min_candidates=1, per_way=True)
-                    qe = far[e.query]          # these stand for the fix at q (an outlier)
-                    de = np.hypot(*(xy[sl][qe] - e.foot).T)
-                    qs, ss, als, ds, fs = (np.concatenate([qs, qe]), np.concatenate([ss, e.seg]),
-                                           np.concatenate([als, e.along]),
-                                           np.concatenate([ds, de]),
-                                           np.concatenate([fs, e.foot]))
-                    ps = np.concatenate([ps, q[sl][qe]])
-                    o = np.lexsort((ds, qs))
-                    qs, ss, als, ds, fs, ps = qs[o], ss[o], als[o], ds[o], fs[o], ps[o]
-            m = len(xy[sl])
-            offs.append(np.searchsorted(qs, np.arange(m + 1), side="left")[1:] + total)
+            far = np.flatnonzero(np.hypot(*(xy[sl] - q[sl]).T) > radius[sl]) \
+                if q is not None else np.zeros(0, np.int64)
+            for qq in ([q] + list(near or [])) if len(far) else []:
+                e = self.graph.candidates(qq[sl][far], radius[sl][far], k=K_NEIGHBOUR,
+                                          min_candidates=1, per_way=True)
+                qe = far[e.query]          # these stand for the fix at qq (an outlier)
+                qs, ss, als, fs = (np.concatenate([qs, qe]), np.concatenate([ss, e.seg]),
+                                   np.concatenate([als, e.along]), np.concatenate([fs, e.foot]))
+                ds = np.concatenate([ds, np.hypot(*(xy[sl][qe] - e.foot).T)])
+                ps = np.concatenate([ps, qq[sl][qe]])
+            if len(far):
+                o = np.lexsort((ds, qs))
+                qs, ss, als, ds, fs, ps = qs[o], ss[o], als[o], ds[o], fs[o], ps[o]
+            offs.append(np.searchsorted(qs, np.arange(len(xy[sl]) + 1), side="left")[1:] + total)
             total += len(qs)
             segs.append(ss)
             alongs.append(als)
@@ -620,10 +412,50 @@ class HmmMatcher:
         """Match fixes given in local metres of the graph; see :class:`MatchResult`."""
         return self.match_many([(t, xy, sigma)])[0]
 
+    def _stack(self, tracks, track_sigma):
+        """Times, positions and σ of all fixes of ``tracks``, track bounds, the matcher of
+        each track (its σ)."""
+        sizes = [len(np.asarray(tr[0])) for tr in tracks]
+        n = int(sum(sizes))
+        bounds = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
+        ts = np.concatenate([np.asarray(tr[0], float) for tr in tracks])
+        xy = np.concatenate([np.atleast_2d(np.asarray(tr[1], float)).reshape(-1, 2)
+                             for tr in tracks])
+        track_sigma = [self.sigma] * len(tracks) if track_sigma is None else track_sigma
+        per = [self.with_sigma(s) if s != self.sigma else self for s in track_sigma]
+        sig = np.empty(n)
+        for m, (a, b), tr in zip(per, zip(bounds[:-1], bounds[1:]), tracks):
+            given = None if tr[2] is None else np.asarray(tr[2], float)
+            sig[a:b] = m.sigma if given is None else np.where(
+                np.isfinite(given) & (given > 0), given, m.sigma)
+        return ts, xy, sig, bounds, per
+
+    def _epochs(self, ts, xy, sig, bounds) -> _Epochs:
+        """Stationary runs of fixes (within :data:`STATIONARY_K` σ of their mean) as epochs."""
+        n = len(xy)
+        run = stationary_runs(xy, bounds, self.stationary_k * sig)
+        first = np.flatnonzero(np.diff(run, prepend=-1))
+        last = np.concatenate([first[1:] - 1, [n - 1]]) if n else first
+        cnt = np.bincount(run).astype(float)
+        exy = np.column_stack([np.bincount(run, xy[:, 0]), np.bincount(run, xy[:, 1])]) / \
+            cnt[:, None] if n else xy
+        starts = np.asarray(bounds[:-1])
+        eb = np.concatenate([run[starts[starts < n]], [len(first)]]).astype(np.int64)
+        return _Epochs(run, exy, np.bincount(run, sig) / cnt if n else sig, ts[first],
+                       ts[last], eb, first)
+
+    def _gaps(self, ep: _Epochs):
+        """Time from each epoch to the next (inf across tracks) and where only a break is
+        allowed (a time gap, a new track)."""
+        dt = ep.t_in[1:] - ep.t_out[:-1]
+        dt[ep.bounds[1:-1] - 1] = np.inf        # a new track: no transition
+        return dt, ~(dt <= self.max_gap)
+
     def match_many(self, tracks, track_sigma=None) -> list:
         """Match several tracks in one pass (one candidate search, one route-store update, one
         Viterbi run with a restart at each track's first fix): the fixed costs of a call are
-        paid once, which is what makes short fleet tracks fast.
+        paid once, which is what makes short fleet tracks fast. A track's match does not depend
+        on the others of the call.
 
         Parameters
         ----------
@@ -639,51 +471,97 @@ class HmmMatcher:
         """
         t0 = time.perf_counter()
         g = self.graph
-        sizes = [len(np.asarray(tr[0])) for tr in tracks]
-        n = int(sum(sizes))
-        bounds = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
-        ts = np.concatenate([np.asarray(tr[0], float) for tr in tracks])
-        xy = np.concatenate([np.atleast_2d(np.asarray(tr[1], float)).reshape(-1, 2)
-                             for tr in tracks])
-        track_sigma = [self.sigma] * len(tracks) if track_sigma is None else track_sigma
-        per = [self.with_sigma(s) if s != self.sigma else self for s in track_sigma]
-        sig = np.empty(n)
-        for m, (a, b), tr in zip(per, zip(bounds[:-1], bounds[1:]), tracks):
-            given = None if tr[2] is None else np.asarray(tr[2], float)
-            sig[a:b] = m.sigma if given is None else np.where(
-                np.isfinite(given) & (given > 0), given, m.sigma)
-        radius = np.repeat([m.radius for m in per], sizes)
-        beta = np.repeat([m.beta for m in per], sizes)
-        backtrack = np.repeat([m.backtrack for m in per], sizes)
-        q = neighbour_points(xy, bounds)
-        off, seg, along, dist, foot, pos = self._candidates(xy, radius, q)
+        ts, xy, sig, bounds, per = self._stack(tracks, track_sigma)
+        n = len(ts)
+        ep = self._epochs(ts, xy, sig, bounds)
+        track_of = np.repeat(np.arange(len(per)), np.diff(ep.bounds))
+        d = self._decode(ep, *(np.array([getattr(m, a) for m in per])[track_of]
+                               for a in ("radius", "beta", "backtrack")))
+        point, along, match_p = match_probability(
+            d["path"], d["off"], d["post"], d["seg"], d["along"], d["foot"], d["dist"], ep.xy,
+            g, ep.bounds, same_m=SAME_ROAD_M, ab=self.calibration)
+        restart = d["back"][d["path"]] < 0
+        mseg = d["seg"][d["path"]]
+        piece = np.cumsum(restart) - 1
+        # alone in its piece of chain (in a track of two epochs or more)
+        lone = (np.bincount(piece)[piece] < 2) & np.repeat(np.diff(ep.bounds) >= 2,
+                                                            np.diff(ep.bounds))
+        # back to the fixes: each fix of a stationary run gets the run's match
+        run = ep.run
+        start = np.zeros(n, bool)
+        start[ep.first] = True
+        foot, along = crawl_positions(xy, ts, run, point[run], along[run], mseg[run], g,
+                                      ep.sigma)
+        mseg, match_p, in_radius, piece, lone = (v[run] for v in (
+            mseg, match_p, d["in_radius"], piece, lone))
+        restart = restart[run] & start
+        moved = np.hypot(*(xy - foot).T)
+        lat, lon = g.to_geodetic(foot[:, 0], foot[:, 1])
+        way = g.seg_way[mseg]
+        seconds = time.perf_counter() - t0
+        scatter = scatter_sigma(xy, mseg, g, bounds)
+        out = []
+        for m, a, b, s_k in zip(per, bounds[:-1], bounds[1:], scatter):
+            sl = slice(a, b)
+            # the fix within MATCHED_GATE σ of its road -- with σ no larger than the scatter of
+            # the fixes across their roads allows (a track that keeps 25 m beside a road with
+            # 2 m of scatter is on a road the map lacks, or carries a bias: not plausible)
+            s_gate = sig[sl] if not np.isfinite(s_k) else np.minimum(
+                sig[sl], max(SIGMA_MIN_M, SCATTER_K * s_k))
+            gate = np.minimum(self.matched_gate * s_gate, MATCHED_MAX_M)
+            matched = (moved[sl] <= gate) & (match_p[sl] >= self.matched_p) & ~lone[sl]
+            out.append(MatchResult(ts[sl], foot[sl], lat[sl], lon[sl], mseg[sl], along[sl],
+                                   moved[sl], in_radius[sl], restart[sl],
+                                   seconds * (b - a) / max(n, 1), way[sl], m.sigma,
+                                   matched, match_p[sl], piece[sl] - piece[a]))
+        return out
+
+    def _decode(self, ep: _Epochs, radius, beta, backtrack) -> dict:
+        """Candidates, emissions, Viterbi path and posteriors of the epochs ``ep``: a dict of
+        the candidates' arrays (``off``, ``seg``, ``along``, ``dist``, ``foot``, ``query``,
+        ``em``), the best path (``path``, ``back``), the posterior of each candidate
+        (``post``) and ``in_radius`` per epoch."""
+        g = self.graph
+        exy, sig = ep.xy, ep.sigma
+        n = len(exy)
+        q = neighbour_points(exy, ep.bounds, radius)
+        off, seg, along, dist, foot, pos = self._candidates(exy, radius, q,
+                                                            adjacent_fixes(exy, ep.bounds))
         query = np.repeat(np.arange(n), np.diff(off))
-        em = self.emission(dist, sig[query]) * stationary_weight(
-            xy, bounds, self.stationary_k * sig, self.stationary_a)[query]
-        d_gc = np.hypot(*(xy[1:] - xy[:-1]).T)
-        dt = np.diff(ts)
-        dt[bounds[1:-1] - 1] = np.inf          # a new track: no transition, the chain restarts
-        forced = ~(dt <= self.max_gap)          # a time gap (or a new track): only a break
-        r_ep = np.maximum(radius[1:], radius[:-1]) if n > 1 else np.zeros(0)
-        fastest = self.max_speed * np.minimum(dt, self.max_gap) + 2 * r_ep
+        em = self.emission(dist, sig[query])
+        dt, forced = self._gaps(ep)
+        fastest = self.max_speed * np.minimum(dt, self.max_gap) + \
+            2 * np.maximum(radius[1:], radius[:-1])
         cut = self.cut
-        # the farthest apart two positions of consecutive fixes can be (fix or neighbours')
-        far = np.where(np.hypot(*(xy - q).T) > radius, np.hypot(*(xy - q).T), 0.0)
-        lim = np.minimum(d_gc + far[1:] + far[:-1] + cut * beta[:-1], fastest)
+        lim = np.zeros(0)
+        if n > 1:
+            # the farthest apart two road points of consecutive epochs can be (bounding boxes)
+            lo = np.column_stack([np.minimum.reduceat(foot[:, i], off[:-1]) for i in (0, 1)])
+            hi = np.column_stack([np.maximum.reduceat(foot[:, i], off[:-1]) for i in (0, 1)])
+            span = np.maximum(hi[1:] - lo[:-1], hi[:-1] - lo[1:])
+            lim = np.minimum(np.hypot(span[:, 0], span[:, 1]) + cut * beta[:-1], fastest)
+        # residuals (the fix's error if the candidate is right), for the shared error; not for
+        # the roads of an outlier's neighbours nor beyond 3 σ (the wide part of the emission)
+        res = exy[query] - foot
+        res[(np.hypot(*(exy[query] - pos).T) > 0) | (dist > 3 * sig[query])] = np.nan
+        rho = np.where(forced, 0.0, self.error_corr * np.exp(-np.maximum(dt, 0.0) /
+                                                              self.error_tau))
+        s2 = np.maximum(sig[1:], sig[:-1]) ** 2
         score = np.empty(len(seg))
         alpha = np.empty(len(seg))
         bet = np.ones(len(seg))
         back = np.full(len(seg), -1, np.int64)
-        e0 = slice(off[0], off[1])
-        score[e0] = em[e0] - em[e0].max()
-        alpha[e0] = np.exp(score[e0] / self.temperature)
-        alpha[e0] /= alpha[e0].sum()
+        inv_temp = 1.0 / self.temperature
+        if n:
+            e0 = slice(off[0], off[1])
+            score[e0] = em[e0] - em[e0].max()
+            alpha[e0] = np.exp(score[e0] * inv_temp)
+            alpha[e0] /= alpha[e0].sum()
         seg_u, seg_v, seg_len = self._g
         kmax = int(np.diff(off).max()) if n else 1
         gap = np.empty((kmax, kmax))
         windows = [(a, min(a + self.window, n - 1)) for a in range(0, n - 1, self.window)]
         stamp = self._stamp[0]
-        inv_temp = 1.0 / self.temperature
         stored = []                            # transition weights of each window
         for a, b in windows:
             self._ensure_rows(a, b, off, seg, lim, backtrack, forced)
@@ -693,50 +571,24 @@ class HmmMatcher:
             pi = np.empty(cap, np.int16)
             pj = np.empty(cap, np.int16)
             pstart = np.empty(b - a + 1, np.int64)
-            k = _forward(a, b, off, seg, along, foot, em, pos, forced, lim, fastest, seg_u,
-                         seg_v, seg_len, self.cache.arrays, beta, backtrack, self.log_break,
-                         cut, score, back, alpha, gap, self._scratch, stamp, inv_temp, pw,
-                         pi, pj, pstart)
+            k = viterbi.forward(a, b, off, seg, along, foot, em, res, forced, lim, fastest,
+                                seg_u, seg_v, seg_len, self.cache.arrays, beta, backtrack, rho,
+                                s2, self.log_break, cut, score, back, alpha, gap,
+                                self._scratch, stamp, inv_temp, pw, pi, pj, pstart)
             stored.append((pw[:k].copy(), pi[:k].copy(), pj[:k].copy(), pstart))
             del pw, pi, pj
         for (a, b), (pw, pi, pj, pstart) in zip(windows[::-1], stored[::-1]):
-            _backward(a, b, off, em, forced, self.log_break, bet, inv_temp, pw, pi, pj,
-                      pstart)
+            viterbi.backward(a, b, off, em, forced, self.log_break, bet, inv_temp, pw, pi, pj,
+                             pstart)
         del stored
         self._stamp[0] += n + 1
-        path = _backtrack(off, score, back)
-        restart = back[path] < 0
-        # posterior of each candidate, and of the chosen road position (candidates whose road
-        # point lies within SAME_ROAD_M of the chosen one: both directions of a two-way road)
         post = alpha * bet
-        post /= np.maximum(np.add.reduceat(post, off[:-1])[query], 1e-300)
-        g_xy = g.xy
-        _, _, d_road, _ = project_points_to_segments(foot[path][query], g_xy[seg_u[seg]],
-                                                     g_xy[seg_v[seg]])
-        near = d_road <= SAME_ROAD_M
-        match_p = np.bincount(query, weights=post * near, minlength=n)
-        mseg, malong = seg[path], along[path]
-        foot = foot[path]
-        lat, lon = g.to_geodetic(foot[:, 0], foot[:, 1])
-        in_radius = np.bincount(query[dist <= radius[query]], minlength=n) > 0
-        way = g.seg_way[mseg]
-        moved = dist[path]
-        piece = np.cumsum(restart) - 1
-        seconds = time.perf_counter() - t0
-        out = []
-        for m, a, b in zip(per, bounds[:-1], bounds[1:]):
-            sl = slice(a, b)
-            pc = piece[sl] - piece[a]
-            size = np.bincount(pc)[pc]
-            gate = np.minimum(self.matched_gate * sig[sl], MATCHED_MAX_M)
-            matched = ((moved[sl] <= gate)
-                       & (match_p[sl] >= self.matched_p)
-                       & ((size >= 2) | (b - a < 2)))
-            out.append(MatchResult(ts[sl], foot[sl], lat[sl], lon[sl], mseg[sl], malong[sl],
-                                   moved[sl], in_radius[sl], restart[sl],
-                                   seconds * (b - a) / max(n, 1), way[sl], m.sigma,
-                                   matched, np.clip(match_p[sl], 0.0, 1.0), pc))
-        return out
+        if n:
+            post /= np.maximum(np.add.reduceat(post, off[:-1])[query], 1e-300)
+        path = viterbi.best_path(off, score, back)
+        return {"off": off, "seg": seg, "along": along, "dist": dist, "foot": foot,
+                "query": query, "em": em, "path": path, "back": back, "post": post,
+                "in_radius": np.bincount(query[dist <= radius[query]], minlength=n) > 0}
 
     def _ensure_rows(self, a, b, off, seg, lim, backtrack, forced):
         """Route rows for the transitions of epochs ``a .. b-1``: sources the candidates of

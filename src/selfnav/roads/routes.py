@@ -13,14 +13,15 @@ the number of tracks. This is the role FMM's precomputed UBODT table plays (Yang
 lazily instead of for every node of the map up front.
 
 :func:`route_nodes` gives the node sequence of a shortest route (for the driven route of a
-matched track).
+matched track); :func:`transition_route_distance` the route distance between road candidates
+(the scalar form is in the matcher's kernel, :mod:`selfnav.roads.viterbi`).
 """
 from __future__ import annotations
 
 import numba
 import numpy as np
 
-from selfnav.roads.graph import RoadGraph
+from selfnav.roads.graph import Candidates, RoadGraph
 
 
 @numba.njit(cache=True)
@@ -144,11 +145,11 @@ class RouteCache:
     """
 
     def __init__(self, graph: RoadGraph, max_entries: int = 4_000_000):
-        csr = graph.csr
+        data, indices, indptr = graph.csr_arrays()       # (scipy not imported: start-up)
         self.graph = graph
-        self.indptr = np.asarray(csr.indptr, np.int64)
-        self.indices = np.asarray(csr.indices, np.int64)
-        self.weights = np.asarray(csr.data, np.float64)
+        self.indptr = np.asarray(indptr, np.int64)
+        self.indices = np.asarray(indices, np.int64)
+        self.weights = np.asarray(data, np.float64)
         n = graph.n_nodes
         self.max_entries = int(max_entries)
         self._dist = np.empty(n)
@@ -388,3 +389,49 @@ def driven_route(graph: RoadGraph, seg, along, foot, restart, *, backtrack=15.0)
     if len(pts) > 1:
         pieces.append((np.asarray(pts), np.asarray(segs, np.int64)))
     return pieces
+
+
+class RouteDistances:
+    """Route distances from a fixed set of source nodes (a thin view of a :class:`RouteCache`
+    that the vectorized :func:`transition_route_distance` uses)."""
+
+    def __init__(self, graph: RoadGraph, sources, limit=np.inf, cache: RouteCache | None = None):
+        self.sources = np.asarray(sources, np.int64)
+        self.limit = float(limit)
+        self.cache = cache or RouteCache(graph)
+
+    def row_of(self, k):
+        """Row of source number ``k`` of the array given at construction."""
+        return np.asarray(k, np.int64)
+
+    def lookup(self, rows, dst):
+        """Distance from source row ``rows`` to node ``dst`` (inf beyond the limit)."""
+        return self.cache.lookup(self.sources[rows], dst, self.limit)
+
+
+def transition_route_distance(graph: RoadGraph, cand: Candidates, i, j, *, backtrack=15.0,
+                              limit=np.inf, distances: RouteDistances | None = None):
+    """Route distance from candidate ``i`` to candidate ``j`` (arrays of candidate indices).
+
+    Forward along the directed graph: rest of segment ``i``, shortest path between the
+    segments, start of segment ``j``. A move backwards shorter than ``backtrack`` metres
+    (noise on a stopped or slow vehicle) counts as its length.
+
+    This is the vectorized (numpy) form of the transition the matcher's numba kernel computes
+    (the tests hold one against the other); an INS-driven matcher can reuse it. ``distances``
+    (a :class:`RouteDistances` built on ``graph.seg_v[cand.seg]``) is reused when given.
+    """
+    if distances is None:
+        distances = RouteDistances(graph, graph.seg_v[cand.seg], max(limit, backtrack))
+    si, sj = cand.seg[i], cand.seg[j]
+    ai, aj = cand.along[i], cand.along[j]
+    Li, Lj = graph.seg_len[si], graph.seg_len[sj]
+    same = si == sj
+    fwd_gap = distances.lookup(distances.row_of(i), graph.seg_u[sj])
+    d_fwd = np.where(same & (aj >= ai), aj - ai, (Li - ai) + fwd_gap + aj)
+    if backtrack > 0:
+        back_gap = RouteDistances(graph, graph.seg_v[sj], backtrack, distances.cache).lookup(
+            np.arange(len(sj)), graph.seg_u[si])
+        d_back = np.where(same & (aj < ai), ai - aj, (Lj - aj) + back_gap + ai)
+        d_fwd = np.where(d_back <= backtrack, np.minimum(d_fwd, d_back), d_fwd)
+    return d_fwd

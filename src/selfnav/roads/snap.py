@@ -34,7 +34,6 @@ def snap_dead_ends(xy, su, sv, sw, snap_m):
         Split points added (appended at the end of ``xy``).
     """
     import shapely
-    from scipy.spatial import cKDTree
 
     n = len(xy)
     und = np.unique(np.sort(np.column_stack([su, sv]), axis=1), axis=0)
@@ -47,7 +46,7 @@ def snap_dead_ends(xy, su, sv, sw, snap_m):
     for u, v, w in zip(su.tolist(), sv.tolist(), sw.tolist()):
         node_way.setdefault(u, set()).add(w)
         node_way.setdefault(v, set()).add(w)
-    kd = cKDTree(xy)
+    kd = shapely.STRtree(shapely.points(xy))
     rep = np.arange(n)
     # undirected segments (one per node pair) for the split search, near each end
     a, b = xy[und[:, 0]], xy[und[:, 1]]
@@ -66,7 +65,7 @@ def snap_dead_ends(xy, su, sv, sw, snap_m):
     def nearest_node(e):
         ways_e = node_way.get(e, set())
         best, best_d = -1, np.inf
-        for m in kd.query_ball_point(xy[e], snap_m):
+        for m in kd.query(shapely.points(xy[e]), predicate="dwithin", distance=snap_m).tolist():
             if m == e or node_way.get(m, set()) & ways_e:
                 continue
             d = float(np.hypot(*(xy[m] - xy[e])))

@@ -1,0 +1,171 @@
+"""What the fixes of a track say before they meet the map (issue 21): where its neighbours put
+each fix, which fixes are one standing car, how the fixes of a standing or crawling car sit
+along its road, and how much of the GNSS error is shared by consecutive fixes.
+
+These are the parts of :class:`selfnav.roads.hmm.HmmMatcher` that look at the fixes alone
+(local metres of the road graph, SI units).
+"""
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+
+def track_ends(n, bounds):
+    """``(first, last)``: boolean masks of the first and last fix of each track (``bounds``:
+    track starts and the total, as from ``np.cumsum``)."""
+    first = np.zeros(n, bool)
+    last = np.zeros(n, bool)
+    starts = np.asarray(bounds[:-1], np.int64)
+    first[starts[starts < n]] = True
+    last[np.asarray(bounds[1:], np.int64)[np.asarray(bounds[1:]) > 0] - 1] = True
+    return first, last
+
+
+def adjacent_fixes(xy, bounds):
+    """The fix before and the fix after each fix within its track (the fix itself at the
+    ends)."""
+    first, last = track_ends(len(xy), bounds)
+    prev = np.where(first[:, None], xy, np.vstack([xy[:1], xy[:-1]]))
+    nxt = np.where(last[:, None], xy, np.vstack([xy[1:], xy[-1:]]))
+    return prev, nxt
+
+
+def neighbour_points(xy, bounds, radius=None):
+    """Where its neighbours put each fix: the midpoint of the fixes before and after it (the
+    one neighbour at a track's ends; the fix itself in a track of one), within each track
+    (``bounds``: track starts and the total, as from ``np.cumsum``).
+
+    With ``radius`` (per fix, m): a track's end fix whose one neighbour lies farther from the
+    fix after it than the end fix does (the neighbour is the likelier outlier) keeps its own
+    position, so an outlier next to the end of a track does not move the end fix's roads."""
+    n = len(xy)
+    if n < 2:
+        return xy.copy()
+    first, last = track_ends(n, bounds)
+    prev = np.vstack([xy[:1], xy[:-1]])
+    nxt = np.vstack([xy[1:], xy[-1:]])
+    prev = np.where(first[:, None], nxt, prev)
+    nxt = np.where(last[:, None], prev, nxt)
+    q = np.where((first & last)[:, None], xy, 0.5 * (prev + nxt))
+    if radius is not None and n > 2:
+        size = np.diff(np.asarray(bounds))
+        long_ = np.repeat(size >= 3, size)
+        nxt2 = np.vstack([xy[2:], xy[-2:]])
+        prev2 = np.vstack([xy[:2], xy[:-2]])
+
+        def d(a, b):
+            return np.hypot(*(a - b).T)
+
+        bad = (first & long_ & (d(nxt, nxt2) > d(xy, nxt2))) | \
+            (last & long_ & (d(prev, prev2) > d(xy, prev2)))
+        q[bad] = xy[bad]
+    return q
+
+
+@numba.njit(cache=True)
+def _runs(xy, starts, reach):  # pragma: no cover - numba
+    n = len(xy)
+    run = np.empty(n, np.int64)
+    r = -1
+    cx = cy = 0.0
+    m = 0
+    for k in range(n):
+        if starts[k] or m == 0 or np.hypot(xy[k, 0] - cx / m, xy[k, 1] - cy / m) > reach[k]:
+            r += 1
+            cx = cy = 0.0
+            m = 0
+        cx += xy[k, 0]
+        cy += xy[k, 1]
+        m += 1
+        run[k] = r
+    return run
+
+
+def stationary_runs(xy, bounds, reach_m):
+    """Run number of each fix (0, 1, ... over all tracks): consecutive fixes of a track each
+    within ``reach_m`` (per fix, m) of the mean of the run so far are one run -- a car standing
+    still (or crawling), matched as one position."""
+    first, _ = track_ends(len(xy), bounds)
+    return _runs(np.ascontiguousarray(xy, float), first,
+                 np.ascontiguousarray(np.broadcast_to(np.asarray(reach_m, float), (len(xy),))))
+
+
+def crawl_positions(xy, t, run, foot, along, seg, graph, sigma):
+    """Road positions of the fixes of runs matched as one (one row per fix; ``foot``,
+    ``along`` and ``seg`` are the run's, repeated): the run's road point, or -- for a run of
+    three or more fixes whose fixes move along the road by more than 2 σ over the run (a car
+    crawling in a queue) -- a constant speed along the run's segment fitted to the fixes,
+    clipped to the segment. ``sigma``: per run, m."""
+    cnt = np.bincount(run)
+    many = cnt[run] >= 3
+    if not many.any():
+        return foot, along
+    r = run[many]
+    sg = seg[many]
+    L = graph.seg_len[sg]
+    u = (graph.xy[graph.seg_v[sg]] - graph.xy[graph.seg_u[sg]]) / \
+        np.where(L > 0, L, 1.0)[:, None]
+    s = np.einsum("ij,ij->i", xy[many] - foot[many], u)       # along the road from the run's
+    tt = t[many]                                              # point
+    m = len(cnt)
+    c = np.maximum(np.bincount(r, minlength=m), 1)
+    mt = np.bincount(r, tt, m) / c
+    ms = np.bincount(r, s, m) / c
+    stt = np.bincount(r, (tt - mt[r]) ** 2, m)
+    slope = np.bincount(r, (tt - mt[r]) * (s - ms[r]), m) / np.where(stt > 0, stt, np.inf)
+    hi = np.full(m, -np.inf)
+    lo = np.full(m, np.inf)
+    np.maximum.at(hi, r, tt)
+    np.minimum.at(lo, r, tt)
+    big = cnt >= 3
+    moving = big & (np.abs(slope) * np.where(big, hi - lo, 0.0) > 2 * sigma)
+    mv = moving[r]
+    if not mv.any():
+        return foot, along
+    fit = np.clip(along[many] + ms[r] + slope[r] * (tt - mt[r]), 0.0, L)
+    idx = np.flatnonzero(many)[mv]
+    along, foot = along.copy(), foot.copy()
+    along[idx] = fit[mv]
+    foot[idx] = graph.xy[graph.seg_u[sg[mv]]] + u[mv] * fit[mv][:, None]
+    return foot, along
+
+
+def error_correlation(xy, near, heading, dt, forced, sigma, tau, prior=20.0):
+    """The share of the GNSS error that consecutive fixes have in common, from the fixes
+    themselves (no match needed): the correlation of the offsets of consecutive fixes from
+    their nearest roads, over the pairs whose two nearest roads are parallel (within 20°) and
+    within 3 σ, each pair's lag divided out as ``exp(-dt/tau)``, shrunk towards 0 by ``prior``
+    pseudo-pairs (a few fixes say little). White noise gives about 0, a Gauss-Markov error
+    with half the variance gives 0.2-0.45 (the offsets to the nearest road see only the part
+    across the road, and a fix nearer another road than its own points away): the matcher
+    scales it (:data:`selfnav.roads.hmm.ERROR_CORR_SCALE`).
+
+    Parameters
+    ----------
+    xy, near : (N, 2) m
+        Fixes (or runs) and their nearest road points.
+    heading : (N,) rad
+        Direction of the nearest road.
+    dt : (N-1,) s
+        Time from each fix to the next.
+    forced : (N-1,) bool
+        No transition there (a new track, a gap).
+    sigma : (N,) m
+    tau : float
+        Correlation time of the shared part, s.
+    """
+    if len(xy) < 2:
+        return 0.0
+    r = xy - near
+    dist = np.hypot(*r.T)
+    d_h = np.abs((heading[1:] - heading[:-1] + np.pi / 2) % np.pi - np.pi / 2)
+    ok = (~forced) & (d_h < np.radians(20.0)) & (dist[1:] < 3 * sigma[1:]) & \
+        (dist[:-1] < 3 * sigma[:-1])
+    if not ok.any():
+        return 0.0
+    a, b = r[:-1][ok], r[1:][ok]
+    w = np.exp(-np.maximum(dt[ok], 0.0) / tau)
+    num = np.sum(np.einsum("ij,ij->i", a, b) * w)
+    den = np.sum(w * w * 0.5 * (np.einsum("ij,ij->i", a, a) + np.einsum("ij,ij->i", b, b)))
+    return float(np.clip(num / (den + prior * np.median(sigma) ** 2), 0.0, 1.0))
