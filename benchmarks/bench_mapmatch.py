@@ -16,13 +16,14 @@ All tracks are simulated (a car driving the real OpenStreetMap extracts shipped 
 
     python benchmarks/bench_mapmatch.py                 # everything (~20 min on 2 cores)
     python benchmarks/bench_mapmatch.py fmm fleet e2e memory dask   # some sections
-    python benchmarks/bench_mapmatch.py real acceptance e2e_fmm memory   # the issue-21 tables
+    python benchmarks/bench_mapmatch.py real calibrate acceptance e2e_fmm memory   # issue 21
     (also: graphs, tracks, outliers; simulated fleets are cached in $SELFNAV_BENCH_CACHE,
     default /tmp/selfnav_bench)
 
 Issue 21: fleets with the properties of a real floating-car fleet (``real``: short tracks,
-unjoined ways, multipath; tuning and reporting seeds apart), the issue-14 acceptance fleets as
-before (``acceptance``), and ``selfnav match`` end to end side by side with FMM (``e2e_fmm``).
+unjoined ways, multipath; tuning, reporting and fresh seeds apart), the calibration of
+``match_p`` on the tuning seed (``calibrate``), the issue-14 acceptance fleets as before
+(``acceptance``), and ``selfnav match`` end to end side by side with FMM (``e2e_fmm``).
 """
 import json
 import os
@@ -173,7 +174,7 @@ def _longest_run(mask):
 # ------------------------------------------------------------------ issue 14: fleets, FMM
 CACHE = Path(os.environ.get("SELFNAV_BENCH_CACHE", tempfile.gettempdir())) / "selfnav_bench"
 SECTIONS = ("graphs", "tracks", "outliers", "fmm", "fleet", "e2e", "memory", "dask", "real",
-            "acceptance", "e2e_fmm")
+            "calibrate", "acceptance", "e2e_fmm")
 
 
 def load():
@@ -487,9 +488,13 @@ def section_dask(graphs):
 
 
 # ------------------------------------------------------------------ issue 21: real-like fleets
-#: seeds: tuning (the defaults of selfnav.roads.hmm were chosen on it) and reporting
+#: seeds: tuning (the defaults of selfnav.roads.hmm were chosen on it and match_p calibrated on
+#: it), reporting, and a fresh one drawn after the model was settled
 TUNE_SEEDS = (1,)
 REPORT_SEEDS = (2, 3)
+FRESH_SEEDS = (4,)
+#: bins of the reliability table of match_p
+P_EDGES = (0.0, 0.5, 0.9, 0.95, 0.97, 0.98, 0.99, 0.995, 1.0001)
 BANDS = {"σ 1-4 m": (1.0, 4.0), "σ 1.5-5 m (harsher)": (1.5, 5.0)}
 
 
@@ -572,7 +577,8 @@ def section_real(graphs):
           "strongly connected core; GNSS σ per track uniform in the band, half white, half "
           "Gauss-Markov (τ 60 s), 2 % multipath outliers 30-150 m. Unjoined: half the ends of "
           "ways that end on another way moved 0.5-3 m off it (their own node). Truth: the OSM "
-          f"centre line driven. Tuning seed {TUNE_SEEDS}, reported seeds {REPORT_SEEDS}. FMM: "
+          f"centre line driven. Tuning seed {TUNE_SEEDS}, reported seeds {REPORT_SEEDS}, fresh "
+          f"seed {FRESH_SEEDS}. FMM: "
           "σ 5 m, k 16, radius 30 m, on the same graph and fixes. Within 5 m: per-track mean "
           "/ fix-weighted; precision: of the fixes flagged matched, share within 5 m.\n")
     print("| map | map as | noise | seed | fixes | raw | FMM σ 5 (track / fix) | selfnav "
@@ -584,7 +590,7 @@ def section_real(graphs):
     for name in graphs:
         truth = read_roads(packaged_map(name), strongly_connected=False)
         with tempfile.TemporaryDirectory() as d:
-            for seed in TUNE_SEEDS + REPORT_SEEDS:
+            for seed in TUNE_SEEDS + REPORT_SEEDS + FRESH_SEEDS:
                 unj = Path(d) / f"unjoined_{seed}.osm"
                 n_unj = unjoin_map(packaged_map(name), unj, seed=seed)
                 for band, sig in BANDS.items():
@@ -595,10 +601,11 @@ def section_real(graphs):
                         fmm = Fmm(read_match_roads(mp))
                         f_sh, f_ok = _fmm_shares(fmm, tracks)
                         sh, ok, flag, p, s = fleet_run(truth, tracks, mp, d)
-                        if seed in REPORT_SEEDS and band == next(iter(BANDS)):
+                        if seed not in TUNE_SEEDS and band == next(iter(BANDS)):
                             pooled["p"].append(p)
                             pooled["ok"].append(ok)
-                        tag = "tune" if seed in TUNE_SEEDS else "report"
+                        tag = ("tune" if seed in TUNE_SEEDS else "report" if seed in
+                               REPORT_SEEDS else "fresh")
                         print(f"| {name} | {label} | {band} | {seed} ({tag}) | {len(ok)} | "
                               f"{100 * raw.mean():.1f} % | {100 * f_sh.mean():.2f} / "
                               f"{100 * f_ok.mean():.2f} % | **{100 * sh.mean():.2f} %** | "
@@ -606,16 +613,82 @@ def section_real(graphs):
                               f"{100 * flag.mean():.1f} % | **{100 * ok[flag].mean():.2f} %** | "
                               f"{s['breaks']} | {s['map_snapped']} |", flush=True)
     p, ok = np.concatenate(pooled["p"]), np.concatenate(pooled["ok"])
-    print(f"\n### Reliability of match_p (reported seeds {REPORT_SEEDS}, σ 1-4 m, both maps, "
-          "both map forms)\n")
+    print(f"\n### Reliability of match_p (seeds {REPORT_SEEDS + FRESH_SEEDS}, σ 1-4 m, both "
+          "maps, both map forms)\n")
+    _reliability(p, ok)
+
+
+def _reliability(p, ok, edges=P_EDGES):
     print("| match_p | fixes | mean match_p | within 5 m of the route |")
     print("| --- | ---: | ---: | ---: |")
-    edges = [0.0, 0.3, 0.5, 0.7, 0.8, 0.9, 0.95, 0.99, 1.0001]
     for lo, hi in zip(edges[:-1], edges[1:]):
         sel = (p >= lo) & (p < hi)
         if sel.any():
-            print(f"| {lo:.2f}-{min(hi, 1):.2f} | {sel.sum()} | {p[sel].mean():.3f} | "
+            print(f"| {lo:.3f}-{min(hi, 1):.3f} | {sel.sum()} | {p[sel].mean():.3f} | "
                   f"{100 * ok[sel].mean():.1f} % |")
+    print(f"\nAll: {len(p)} fixes, mean match_p {p.mean():.4f}, within 5 m {100 * ok.mean():.2f} %,"
+          f" Brier score {np.mean((p - ok) ** 2):.4f}.")
+
+
+def section_calibrate(graphs):
+    """Issue 21: the calibration of match_p, fitted on the tuning seed only: the fleets of
+    ``real`` (σ 1-4 m, both maps, both map forms) matched with the model's posterior
+    (``calibration=None``), a logistic map of its log odds fitted to "within 5 m of the route"
+    (Platt scaling), the flag's precision against its threshold."""
+    import selfnav.roads.fleet as fleet_mod
+    from selfnav.sim.fleet import simulate_real_fleet, unjoin_map
+
+    print(f"\n## Calibration of match_p on the tuning seed {TUNE_SEEDS} (load {load():.1f})\n")
+    orig = fleet_mod.MatchParams.matcher
+
+    def raw(self, graph):                     # the posterior itself, not calibrated
+        m = orig(self, graph)
+        m.calibration = None
+        return m
+
+    fleet_mod.MatchParams.matcher = raw
+    fleet_mod._MATCHERS.clear()
+    ps, oks, flags = [], [], []
+    try:
+        for name in graphs:
+            truth = read_roads(packaged_map(name), strongly_connected=False)
+            with tempfile.TemporaryDirectory() as d:
+                for seed in TUNE_SEEDS:
+                    unj = Path(d) / f"unjoined_{seed}.osm"
+                    unjoin_map(packaged_map(name), unj, seed=seed)
+                    tracks = simulate_real_fleet(truth, 263, seed=seed, sigma=BANDS["σ 1-4 m"])
+                    for mp in (packaged_map(name), unj):
+                        _, ok, _, p, _ = fleet_run(truth, tracks, mp, d)
+                        ps.append(p)
+                        oks.append(ok)
+    finally:
+        fleet_mod.MatchParams.matcher = orig
+        fleet_mod._MATCHERS.clear()
+    p, ok = np.concatenate(ps), np.concatenate(oks).astype(float)
+    from selfnav.roads.posterior import P_EPS
+
+    z = np.log(np.clip(p, P_EPS, 1.0)) - np.log(np.clip(1.0 - p, P_EPS, 1.0))
+    X = np.column_stack([z, np.ones_like(z)])
+    w = np.array([1.0, 0.0])
+    for _ in range(50):                       # logistic regression, Newton steps
+        q = 1.0 / (1.0 + np.exp(-X @ w))
+        w += np.linalg.solve((X * (q * (1 - q))[:, None]).T @ X + 1e-9 * np.eye(2),
+                             X.T @ (ok - q))
+    print(f"Fitted: a = {w[0]:.3f}, b = {w[1]:.3f} (selfnav.roads.hmm.MATCH_P_AB). The model's "
+          "posterior, before the map:\n")
+    _reliability(p, ok, (0.0, 0.3, 0.5, 0.7, 0.8, 0.9, 0.95, 0.99, 1.0001))
+    q = 1.0 / (1.0 + np.exp(-X @ w))
+    print("\nAfter it (the tuning seed itself):\n")
+    _reliability(q, ok)
+    print("\nThe flag's precision (within 5 m, of the fixes at or above the threshold, the "
+          "other conditions of `matched` aside) and the share flagged:\n")
+    print("| threshold (calibrated) | the posterior's | precision | share |")
+    print("| ---: | ---: | ---: | ---: |")
+    for thr in (0.95, 0.96, 0.97, 0.98, 0.99):
+        sel = q >= thr
+        z_thr = (np.log(thr / (1 - thr)) - w[1]) / w[0]
+        print(f"| {thr:.2f} | {1 / (1 + np.exp(-z_thr)):.3f} | {100 * ok[sel].mean():.2f} % | "
+              f"{100 * sel.mean():.1f} % |")
 
 
 def section_acceptance(graphs):

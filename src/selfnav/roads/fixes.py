@@ -67,11 +67,21 @@ def neighbour_points(xy, bounds, radius=None):
 def _runs(xy, starts, reach):  # pragma: no cover - numba
     n = len(xy)
     run = np.empty(n, np.int64)
+    lone = np.zeros(n, np.bool_)
     r = -1
     cx = cy = 0.0
     m = 0
     for k in range(n):
-        if starts[k] or m == 0 or np.hypot(xy[k, 0] - cx / m, xy[k, 1] - cy / m) > reach[k]:
+        if not starts[k] and m > 0 and \
+                np.hypot(xy[k, 0] - cx / m, xy[k, 1] - cy / m) > reach[k]:
+            # one fix away and the next one back: a multipath outlier of the standing car
+            if k + 1 < n and not starts[k + 1] and \
+                    np.hypot(xy[k + 1, 0] - cx / m, xy[k + 1, 1] - cy / m) <= reach[k + 1]:
+                run[k] = r
+                lone[k] = True
+                continue
+            m = 0
+        if starts[k] or m == 0:
             r += 1
             cx = cy = 0.0
             m = 0
@@ -79,26 +89,30 @@ def _runs(xy, starts, reach):  # pragma: no cover - numba
         cy += xy[k, 1]
         m += 1
         run[k] = r
-    return run
+    return run, lone
 
 
-def stationary_runs(xy, bounds, reach_m):
+def stationary_runs(xy, bounds, reach_m, outliers=False):
     """Run number of each fix (0, 1, ... over all tracks): consecutive fixes of a track each
     within ``reach_m`` (per fix, m) of the mean of the run so far are one run -- a car standing
-    still (or crawling), matched as one position."""
+    still (or crawling), matched as one position. A single fix beyond the reach whose next fix
+    is back within it belongs to the run too, as an outlier (multipath while standing): with
+    ``outliers``, also returns the mask of those (left out of the run's mean)."""
     first, _ = track_ends(len(xy), bounds)
-    return _runs(np.ascontiguousarray(xy, float), first,
-                 np.ascontiguousarray(np.broadcast_to(np.asarray(reach_m, float), (len(xy),))))
+    run, lone = _runs(np.ascontiguousarray(xy, float), first, np.ascontiguousarray(
+        np.broadcast_to(np.asarray(reach_m, float), (len(xy),))))
+    return (run, lone) if outliers else run
 
 
-def crawl_positions(xy, t, run, foot, along, seg, graph, sigma):
+def crawl_positions(xy, t, run, foot, along, seg, graph, sigma, outlier=None):
     """Road positions of the fixes of runs matched as one (one row per fix; ``foot``,
     ``along`` and ``seg`` are the run's, repeated): the run's road point, or -- for a run of
     three or more fixes whose fixes move along the road by more than 2 σ over the run (a car
-    crawling in a queue) -- a constant speed along the run's segment fitted to the fixes,
-    clipped to the segment. ``sigma``: per run, m."""
-    cnt = np.bincount(run)
-    many = cnt[run] >= 3
+    crawling in a queue) -- a constant speed along the run's segment fitted to the fixes
+    (not to its ``outlier`` fixes), clipped to the segment. ``sigma``: per run, m."""
+    keep = np.ones(len(run), bool) if outlier is None else ~np.asarray(outlier, bool)
+    cnt = np.bincount(run[keep], minlength=run.max() + 1 if len(run) else 0)
+    many = (cnt[run] >= 3) & keep
     if not many.any():
         return foot, along
     r = run[many]
@@ -120,14 +134,18 @@ def crawl_positions(xy, t, run, foot, along, seg, graph, sigma):
     np.minimum.at(lo, r, tt)
     big = cnt >= 3
     moving = big & (np.abs(slope) * np.where(big, hi - lo, 0.0) > 2 * sigma)
-    mv = moving[r]
-    if not mv.any():
+    if not moving.any():
         return foot, along
-    fit = np.clip(along[many] + ms[r] + slope[r] * (tt - mt[r]), 0.0, L)
-    idx = np.flatnonzero(many)[mv]
+    # every fix of a moving run (its outliers too) at the fitted speed
+    every = moving[run]
+    r, sg = run[every], seg[every]
+    L = graph.seg_len[sg]
+    u = (graph.xy[graph.seg_v[sg]] - graph.xy[graph.seg_u[sg]]) / \
+        np.where(L > 0, L, 1.0)[:, None]
+    fit = np.clip(along[every] + ms[r] + slope[r] * (t[every] - mt[r]), 0.0, L)
     along, foot = along.copy(), foot.copy()
-    along[idx] = fit[mv]
-    foot[idx] = graph.xy[graph.seg_u[sg[mv]]] + u[mv] * fit[mv][:, None]
+    along[every] = fit
+    foot[every] = graph.xy[graph.seg_u[sg]] + u * fit[:, None]
     return foot, along
 
 

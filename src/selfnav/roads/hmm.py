@@ -102,7 +102,7 @@ ERROR_CORR_MAX = 0.9
 #: Calibration of ``match_p`` (:mod:`selfnav.roads.posterior`): ``a``, ``b`` of the logistic map
 #: of the posterior's log odds, fitted on the tuning fleets (benchmarks/bench_mapmatch.py
 #: ``calibrate``, seed 1).
-MATCH_P_AB = (0.34, 3.0)
+MATCH_P_AB = (0.443, 2.778)
 
 
 @dataclass
@@ -206,6 +206,7 @@ class _Epochs:
     t_out: np.ndarray      # (E,) time of the last fix, s
     bounds: np.ndarray     # epochs of each track: starts and the total
     first: np.ndarray      # (E,) first fix of each epoch
+    outlier: np.ndarray    # (N,) the fix is an outlier of its run (not in its mean)
 
 
 class HmmMatcher:
@@ -431,18 +432,20 @@ class HmmMatcher:
         return ts, xy, sig, bounds, per
 
     def _epochs(self, ts, xy, sig, bounds) -> _Epochs:
-        """Stationary runs of fixes (within :data:`STATIONARY_K` σ of their mean) as epochs."""
+        """Stationary runs of fixes (within :data:`STATIONARY_K` σ of their mean; a single fix
+        beyond that between two within it is the standing car's outlier) as epochs."""
         n = len(xy)
-        run = stationary_runs(xy, bounds, self.stationary_k * sig)
+        run, out = stationary_runs(xy, bounds, self.stationary_k * sig, outliers=True)
         first = np.flatnonzero(np.diff(run, prepend=-1))
         last = np.concatenate([first[1:] - 1, [n - 1]]) if n else first
         cnt = np.bincount(run).astype(float)
-        exy = np.column_stack([np.bincount(run, xy[:, 0]), np.bincount(run, xy[:, 1])]) / \
-            cnt[:, None] if n else xy
+        w = (~out).astype(float)                # an outlier of a standing car: not in the mean
+        exy = np.column_stack([np.bincount(run, w * xy[:, 0]), np.bincount(run, w * xy[:, 1])]) \
+            / np.bincount(run, w)[:, None] if n else xy
         starts = np.asarray(bounds[:-1])
         eb = np.concatenate([run[starts[starts < n]], [len(first)]]).astype(np.int64)
         return _Epochs(run, exy, np.bincount(run, sig) / cnt if n else sig, ts[first],
-                       ts[last], eb, first)
+                       ts[last], eb, first, out)
 
     def _gaps(self, ep: _Epochs):
         """Time from each epoch to the next (inf across tracks) and where only a break is
@@ -491,7 +494,7 @@ class HmmMatcher:
         start = np.zeros(n, bool)
         start[ep.first] = True
         foot, along = crawl_positions(xy, ts, run, point[run], along[run], mseg[run], g,
-                                      ep.sigma)
+                                      ep.sigma, ep.outlier)
         mseg, match_p, in_radius, piece, lone = (v[run] for v in (
             mseg, match_p, d["in_radius"], piece, lone))
         restart = restart[run] & start

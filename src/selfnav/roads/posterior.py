@@ -22,6 +22,10 @@ import numpy as np
 
 from selfnav.roads.graph import project_points_to_segments
 
+#: The posterior is taken within [P_EPS, 1 - P_EPS] for the calibration (what the output's four
+#: decimals resolve; the calibration is fitted on them).
+P_EPS = 1e-4
+
 
 def _ranges(off, epochs):
     """Candidate indices of the given epochs (CSR ``off``) and the position in ``epochs`` of
@@ -106,8 +110,8 @@ def match_probability(path, off, post, seg, along, foot, dist, xy, graph, bounds
             p = np.maximum(p, road_mass(point, off, shift, post, seg, foot, dist, xy, graph,
                                         track, same_m, need=need, way_of=way))
     p = np.clip(p, 0.0, 1.0)
-    if ab is not None:
-        z = np.log(np.clip(p, 1e-9, 1.0)) - np.log(np.clip(1.0 - p, 1e-9, 1.0))
+    if ab is not None:                     # (log odds within ±9.2: the 4 decimals of the output)
+        z = np.log(np.clip(p, P_EPS, 1.0)) - np.log(np.clip(1.0 - p, P_EPS, 1.0))
         p = 1.0 / (1.0 + np.exp(-(ab[0] * z + ab[1])))
     return point, a_s, p
 
