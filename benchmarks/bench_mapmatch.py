@@ -632,7 +632,7 @@ def _reliability(p, ok, edges=P_EDGES):
 
 def section_calibrate(graphs):
     """Issue 21: the calibration of match_p, fitted on the tuning seed only: the fleets of
-    ``real`` (σ 1-4 m, both maps, both map forms) matched with the model's posterior
+    ``real`` (both noise bands, both maps, both map forms) matched with the model's posterior
     (``calibration=None``), a logistic map of its log odds fitted to "within 5 m of the route"
     (Platt scaling), the flag's precision against its threshold."""
     import selfnav.roads.fleet as fleet_mod
@@ -656,11 +656,12 @@ def section_calibrate(graphs):
                 for seed in TUNE_SEEDS:
                     unj = Path(d) / f"unjoined_{seed}.osm"
                     unjoin_map(packaged_map(name), unj, seed=seed)
-                    tracks = simulate_real_fleet(truth, 263, seed=seed, sigma=BANDS["σ 1-4 m"])
-                    for mp in (packaged_map(name), unj):
-                        _, ok, _, p, _ = fleet_run(truth, tracks, mp, d)
-                        ps.append(p)
-                        oks.append(ok)
+                    for sig in BANDS.values():
+                        tracks = simulate_real_fleet(truth, 263, seed=seed, sigma=sig)
+                        for mp in (packaged_map(name), unj):
+                            _, ok, _, p, _ = fleet_run(truth, tracks, mp, d)
+                            ps.append(p)
+                            oks.append(ok)
     finally:
         fleet_mod.MatchParams.matcher = orig
         fleet_mod._MATCHERS.clear()
