@@ -106,46 +106,44 @@ def stationary_runs(xy, bounds, reach_m, outliers=False):
 
 def crawl_positions(xy, t, run, foot, along, seg, graph, sigma, outlier=None):
     """Road positions of the fixes of runs matched as one (one row per fix; ``foot``,
-    ``along`` and ``seg`` are the run's, repeated): the run's road point, or -- for a run of
-    three or more fixes whose fixes move along the road by more than 2 σ over the run (a car
-    crawling in a queue) -- a constant speed along the run's segment fitted to the fixes
-    (not to its ``outlier`` fixes), clipped to the segment. ``sigma``: per run, m."""
+    ``along`` and ``seg`` are the run's, repeated; ``sigma`` per run, m).
+
+    A run is a car standing still or crawling: its motion along its segment is fitted as a
+    constant speed to its fixes (not to its ``outlier`` fixes), and the fitted motion shrunk
+    towards standing still by the share of it the noise explains (positive-part James-Stein:
+    ``max(0, 1 - σ² / Σ fitted²)``, one degree of freedom), clipped to the segment. A standing
+    car's fixes all get (about) the run's point, a slow car's its fitted positions."""
     keep = np.ones(len(run), bool) if outlier is None else ~np.asarray(outlier, bool)
-    cnt = np.bincount(run[keep], minlength=run.max() + 1 if len(run) else 0)
-    many = (cnt[run] >= 3) & keep
+    m = int(run.max()) + 1 if len(run) else 0
+    cnt = np.bincount(run[keep], minlength=m)
+    many = (cnt[run] >= 2) & keep
     if not many.any():
         return foot, along
+
+    def unit(sg):
+        L = graph.seg_len[sg]
+        return L, (graph.xy[graph.seg_v[sg]] - graph.xy[graph.seg_u[sg]]) / \
+            np.where(L > 0, L, 1.0)[:, None]
+
     r = run[many]
-    sg = seg[many]
-    L = graph.seg_len[sg]
-    u = (graph.xy[graph.seg_v[sg]] - graph.xy[graph.seg_u[sg]]) / \
-        np.where(L > 0, L, 1.0)[:, None]
+    _, u = unit(seg[many])
     s = np.einsum("ij,ij->i", xy[many] - foot[many], u)       # along the road from the run's
     tt = t[many]                                              # point
-    m = len(cnt)
-    c = np.maximum(np.bincount(r, minlength=m), 1)
+    c = np.maximum(cnt, 1)
     mt = np.bincount(r, tt, m) / c
     ms = np.bincount(r, s, m) / c
     stt = np.bincount(r, (tt - mt[r]) ** 2, m)
     slope = np.bincount(r, (tt - mt[r]) * (s - ms[r]), m) / np.where(stt > 0, stt, np.inf)
-    hi = np.full(m, -np.inf)
-    lo = np.full(m, np.inf)
-    np.maximum.at(hi, r, tt)
-    np.minimum.at(lo, r, tt)
-    big = cnt >= 3
-    moving = big & (np.abs(slope) * np.where(big, hi - lo, 0.0) > 2 * sigma)
-    if not moving.any():
-        return foot, along
-    # every fix of a moving run (its outliers too) at the fitted speed
-    every = moving[run]
-    r, sg = run[every], seg[every]
-    L = graph.seg_len[sg]
-    u = (graph.xy[graph.seg_v[sg]] - graph.xy[graph.seg_u[sg]]) / \
-        np.where(L > 0, L, 1.0)[:, None]
-    fit = np.clip(along[every] + ms[r] + slope[r] * (t[every] - mt[r]), 0.0, L)
+    fitted = slope ** 2 * stt                                 # Σ of the fitted motion²
+    shrink = np.where(fitted > 0, np.maximum(0.0, 1.0 - sigma[:m] ** 2 /
+                                             np.where(fitted > 0, fitted, 1.0)), 0.0)
+    every = (cnt >= 2)[run]                                   # (its outliers too)
+    r = run[every]
+    L, u = unit(seg[every])
+    fit = np.clip(along[every] + ms[r] + shrink[r] * slope[r] * (t[every] - mt[r]), 0.0, L)
     along, foot = along.copy(), foot.copy()
     along[every] = fit
-    foot[every] = graph.xy[graph.seg_u[sg]] + u * fit[:, None]
+    foot[every] = graph.xy[graph.seg_u[seg[every]]] + u * fit[:, None]
     return foot, along
 
 

@@ -313,6 +313,7 @@ def match_tracks(items: Iterable, roads, params: MatchParams = MatchParams(), *,
         m = process_matcher(graph if graph is not None else roads, params)
         params = replace(params, error_corr=fleet_error_corr(m, items,
                                                               auto_sigma=params.sigma_m is None))
+        run.extra["error_corr"] = params.error_corr
     if client is None and scheduler is None and (
             workers == 0 or (workers is None and (total < auto_min_fixes or len(items) < 2))):
         yield from _in_process(items, graph if graph is not None else roads, params, route,
@@ -530,6 +531,7 @@ def match_files(gnss, map_path, out, *, route_out=None, sigma_m: float | None = 
             "mode": run.mode, "workers": run.workers, "startup_seconds": run.startup_s,
             "map_nodes": graph.n_nodes, "map_segments": graph.n_segments,
             "sigma_m": probe.sigma, "sigma_estimated": sigma_m is None,
+            "error_corr": run.extra.get("error_corr", 0.0),
             "beta_m": probe.beta, "radius_m": probe.radius,
             "failed": [{"track_id": t, "error": e} for t, e in failures[:100]]}
 

@@ -102,7 +102,7 @@ ERROR_CORR_MAX = 0.9
 #: Calibration of ``match_p`` (:mod:`selfnav.roads.posterior`): ``a``, ``b`` of the logistic map
 #: of the posterior's log odds, fitted on the tuning fleets (benchmarks/bench_mapmatch.py
 #: ``calibrate``: seed 1, both noise bands).
-MATCH_P_AB = (0.407, 2.82)
+MATCH_P_AB = (0.404, 2.836)
 
 
 @dataclass
