@@ -9,7 +9,6 @@ import pytest
 
 from selfnav.cli import main
 from selfnav.io.csvio import read_table, write_csv
-from selfnav.roads.fixes import adjacent_fixes
 from selfnav.roads.hmm import HmmMatcher, neighbour_points, transition_route_distance
 from selfnav.roads.routes import node_distances
 from selfnav.roads.graph import (Candidates, packaged_map, project_points_to_segments,
@@ -103,8 +102,8 @@ def test_viterbi_and_posterior_agree_with_brute_force(maps, seed):
     ep = m._epochs(t, xy, np.full(len(t), m.sigma), bounds)
     assert len(ep.xy) == len(t)                # (no stationary run: one epoch per fix)
     dec = m._decode(ep, radius, np.full(len(t), m.beta), np.full(len(t), m.backtrack))
-    off, seg, along, dist, foot, pos = m._candidates(
-        xy, radius, neighbour_points(xy, bounds, radius), adjacent_fixes(xy, bounds))
+    off, seg, along, dist, foot, pos = m._candidates(xy, radius,
+                                                     neighbour_points(xy, bounds, radius))
     np.testing.assert_array_equal(dec["seg"], seg)
     assert np.diff(off)[3] > 3                 # the outlier got its neighbours' roads
     query = np.repeat(np.arange(len(t)), np.diff(off))

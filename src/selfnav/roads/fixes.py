@@ -22,15 +22,6 @@ def track_ends(n, bounds):
     return first, last
 
 
-def adjacent_fixes(xy, bounds):
-    """The fix before and the fix after each fix within its track (the fix itself at the
-    ends)."""
-    first, last = track_ends(len(xy), bounds)
-    prev = np.where(first[:, None], xy, np.vstack([xy[:1], xy[:-1]]))
-    nxt = np.where(last[:, None], xy, np.vstack([xy[1:], xy[-1:]]))
-    return prev, nxt
-
-
 def neighbour_points(xy, bounds, radius=None):
     """Where its neighbours put each fix: the midpoint of the fixes before and after it (the
     one neighbour at a track's ends; the fix itself in a track of one), within each track

@@ -13,8 +13,8 @@ sparseness"), with what real fleets need (issue 21):
 * **states** at each epoch are road candidates: the closest point of each nearby road (one per
   OSM way and direction) within a search radius, from
   :meth:`selfnav.roads.graph.RoadGraph.candidates` (the nearest always among them); a fix far
-  from where its neighbours put it (multipath) also gets the roads near that point and near
-  its two neighbours (:meth:`HmmMatcher._candidates`);
+  from where its neighbours put it (multipath) also gets the roads near that point
+  (:meth:`HmmMatcher._candidates`);
 * **emission**: Gaussian in the distance between fix and candidate with a small wide part
   (:meth:`HmmMatcher.emission`), σ the fix's ``sigma_m`` (or the track's);
 * **transition**: exponential in the *detour* the route makes between the two road points,
@@ -56,8 +56,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from selfnav.roads import viterbi
-from selfnav.roads.fixes import (adjacent_fixes, crawl_positions, error_correlation,
-                                 neighbour_points, stationary_runs)
+from selfnav.roads.fixes import (crawl_positions, error_correlation, neighbour_points,
+                                 stationary_runs)
 from selfnav.roads.graph import RoadGraph
 from selfnav.roads.grid import nearest_distance
 from selfnav.roads.posterior import match_probability, scatter_sigma
@@ -82,8 +82,7 @@ MATCHED_MAX_M = 30.0
 #: ... and σ in that test at most SCATTER_K times the scatter of the track's fixes across their
 #: roads (:func:`scatter_sigma`; the shared part of the error does not show in it).
 SCATTER_K = 2.0
-#: Roads near the neighbours' interpolation (and near each neighbour) a far-off fix gets as
-#: candidates besides its own.
+#: Roads near the neighbours' interpolation a far-off fix gets as candidates besides its own.
 K_NEIGHBOUR = 4
 #: The posterior sums use every log probability divided by this (1: the model's posterior);
 #: the Viterbi path does not depend on it.
@@ -102,7 +101,7 @@ ERROR_CORR_MAX = 0.9
 #: Calibration of ``match_p`` (:mod:`selfnav.roads.posterior`): ``a``, ``b`` of the logistic map
 #: of the posterior's log odds, fitted on the tuning fleets (benchmarks/bench_mapmatch.py
 #: ``calibrate``: seed 1, both noise bands).
-MATCH_P_AB = (0.404, 2.836)
+MATCH_P_AB = (0.416, 2.716)
 
 
 @dataclass
@@ -367,16 +366,15 @@ class HmmMatcher:
                               forced, sig, self.error_tau)
         return float(min(ERROR_CORR_MAX, ERROR_CORR_SCALE * r))
 
-    def _candidates(self, xy, radius, q=None, near=None):
+    def _candidates(self, xy, radius, q=None):
         """Candidates of all epochs, searched window by window: ``(off, seg, along, dist, foot,
         pos)`` (``pos``: the position of the fix the candidate stands for).
 
         With ``q`` (one point per epoch: where its neighbours put it,
         :func:`~selfnav.roads.fixes.neighbour_points`), an epoch that lies more than its search
-        radius from its ``q`` also gets the roads near ``q`` and near each point of ``near``
-        (its neighbours; at most :data:`K_NEIGHBOUR` each, foot points of those points,
-        distances from the fix): a multipath outlier then keeps the roads its neighbours are on
-        as candidates, instead of only the roads under the outlier."""
+        radius from its ``q`` also gets the roads near ``q`` (at most :data:`K_NEIGHBOUR`, foot
+        points of ``q``, distances from the fix): a multipath outlier then keeps the road its
+        neighbours are on as a candidate, instead of only the roads under the outlier."""
         n = len(xy)
         offs, segs, alongs, dists, feet, poss = [np.zeros(1, np.int64)], [], [], [], [], []
         total = 0
@@ -388,15 +386,14 @@ class HmmMatcher:
             ps = xy[sl][qs]
             far = np.flatnonzero(np.hypot(*(xy[sl] - q[sl]).T) > radius[sl]) \
                 if q is not None else np.zeros(0, np.int64)
-            for qq in ([q] + list(near or [])) if len(far) else []:
-                e = self.graph.candidates(qq[sl][far], radius[sl][far], k=K_NEIGHBOUR,
+            if len(far):
+                e = self.graph.candidates(q[sl][far], radius[sl][far], k=K_NEIGHBOUR,
                                           min_candidates=1, per_way=True)
-                qe = far[e.query]          # these stand for the fix at qq (an outlier)
+                qe = far[e.query]          # these stand for the fix at q (an outlier)
                 qs, ss, als, fs = (np.concatenate([qs, qe]), np.concatenate([ss, e.seg]),
                                    np.concatenate([als, e.along]), np.concatenate([fs, e.foot]))
                 ds = np.concatenate([ds, np.hypot(*(xy[sl][qe] - e.foot).T)])
-                ps = np.concatenate([ps, qq[sl][qe]])
-            if len(far):
+                ps = np.concatenate([ps, q[sl][qe]])
                 o = np.lexsort((ds, qs))
                 qs, ss, als, ds, fs, ps = qs[o], ss[o], als[o], ds[o], fs[o], ps[o]
             offs.append(np.searchsorted(qs, np.arange(len(xy[sl]) + 1), side="left")[1:] + total)
@@ -528,8 +525,7 @@ class HmmMatcher:
         exy, sig = ep.xy, ep.sigma
         n = len(exy)
         q = neighbour_points(exy, ep.bounds, radius)
-        off, seg, along, dist, foot, pos = self._candidates(exy, radius, q,
-                                                            adjacent_fixes(exy, ep.bounds))
+        off, seg, along, dist, foot, pos = self._candidates(exy, radius, q)
         query = np.repeat(np.arange(n), np.diff(off))
         em = self.emission(dist, sig[query])
         dt, forced = self._gaps(ep)
