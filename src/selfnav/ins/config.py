@@ -381,8 +381,6 @@ class Integrity:
     reinit_after_s : s of fixes that agree with each other and move with the INS but stand
         outside its envelope before the INS, not the GNSS, is taken as the faulty side; and
         the span of fixes the navigator restarts from when the INS is lost
-    reinit_sigma_ratio : the INS is lost when its position σ exceeds the fixes' by this
-        factor and they agree with each other (it has nothing left to add)
     max_fault_s : the longest GNSS fault the navigator holds out against (seed 004: outliers
         for up to 5 minutes): fixes that agree with each other after an episode this long,
         with no reference left, restart the INS
@@ -394,11 +392,12 @@ class Integrity:
     fault_ramp_mps : the ramp family: the rates of a drag, m/s (a spoofer's, a receiver
         pulled off), with an offset of ``fault_ramp_onset_s`` times that rate
     fault_ramp_onset_s : s of drag before a ramp is noticed (the offset it carries then)
-    fault_mean_s : the mean length of a GNSS fault, s: the prior odds that an episode's fault
-        has ended after ``d`` s are ``e^{d/T} − 1`` (runs the evidence cannot tell from health
-        are taken back after ``T ln(1/α)``; seed 004's windows last up to 5 minutes)
-    lost_m, lost_mps, lost_rad : the INS-lost hypothesis of the run test: how far the dead
-        reckoning may be off beyond its covariance, m, m/s and rad of heading
+    fault_mean_s : the mean length of a GNSS fault, s: the prior odds that a fault seen ``d`` s
+        ago has ended are ``e^{d/T} − 1`` (runs the evidence cannot tell from health are taken
+        back after ``T ln(1/α)``; seed 004's windows last 30 s to 5 minutes)
+    lost_m, lost_mps, lost_rad, lost_mps2 : the INS-lost hypothesis of the run test: how far
+        the dead reckoning may be off beyond its covariance, m, m/s, rad of heading and m/s² of
+        acceleration
     outage_s : s without a fix that count as an outage (status dead-reckoning)
     separation_floor_m : smallest σ of a separation between two solutions (numerics), m
     """
@@ -422,17 +421,17 @@ class Integrity:
     innovation_windows: tuple = (4, 8, 16, 32)
     velocity_span_s: float = 2.0
     reinit_after_s: float = 20.0
-    reinit_sigma_ratio: float = 10.0
     max_fault_s: float = 300.0
     fault_white_sigmas: tuple = (3.0, 10.0, 30.0, 100.0)
     fault_gm_sigmas: tuple = (3.0, 10.0, 30.0)
     fault_gm_s: tuple = (2.0, 10.0, 30.0)
     fault_ramp_mps: tuple = (0.5, 3.0)
     fault_ramp_onset_s: float = 10.0
-    fault_mean_s: float = 30.0
+    fault_mean_s: float = 120.0
     lost_m: float = 1000.0
     lost_mps: float = 10.0
     lost_rad: float = 1.0
+    lost_mps2: float = 1.0
     outage_s: float = 2.0
     separation_floor_m: float = 0.05
 

@@ -231,17 +231,18 @@ class HeadingHypotheses:
             C += w[k] * np.outer(d, d)
         return C
 
+    def covariance_about(self, k: int) -> np.ndarray:
+        """The whole sum's covariance about hypothesis ``k``: ``Σ_j w_j (P_j + d_j d_jᵀ)``,
+        ``d_j`` hypothesis ``j``'s error-state difference from ``k``."""
+        w = self.weights
+        P = sum(w[j] * g.P for j, g in enumerate(self.filters)) + self.spread(k)
+        return 0.5 * (P + P.T)
+
     def collapse(self):
         """The best hypothesis, its covariance that of the whole sum about it."""
         k = self.best
         f = self.filters[k]
-        w = self.weights
-        P = w[k] * f.P
-        for j, g in enumerate(self.filters):
-            if j != k:
-                P = P + w[j] * g.P
-        f.P = P + self.spread(k)
-        f.P = 0.5 * (f.P + f.P.T)
+        f.P = self.covariance_about(k)
         return f
 
     def output_covariance(self) -> np.ndarray:

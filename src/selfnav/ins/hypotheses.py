@@ -72,6 +72,7 @@ class Episode:
     origin: tuple | None = None                 # (lat, lon) of the first fix of the episode
     track: list = field(default_factory=list)   # the recent fixes by themselves
     characterised: bool = False
+    t_fault: float | None = None                # the last time the fixes looked faulty
 
     def to_dict(self) -> dict:
         return {"start_s": self.t_start, "end_s": self.t_end, "kind": self.kind,
@@ -346,7 +347,10 @@ class FaultBank:
             self._characterise(ep, fix)
         # the GNSS branch: the fixes by themselves (absolute positions), for "the INS is lost"
         ep.track = [f for f in ep.track if f.t >= t - ig.reinit_after_s] + [fix]
-        lost = self._ins_lost(ep, flt, t)
+        self.run.append(fix)
+        self.run = [f for f in self.run if f.t >= t - ig.run_max_s]
+        test = self._run_test(flt)
+        lost = self._ins_lost(ep, flt, t, test)
         if lost is not None:
             self.episode_origin = ep.origin
             self._close(t, kind="ins-fault")
@@ -355,11 +359,9 @@ class FaultBank:
             self.used_streak = 1
             self.t_healthy = t
             return Verdict(FixStatus.USED, lost[0], nis, reinit_from=lost[1])
-        self.run.append(fix)
-        self.run = [f for f in self.run if f.t >= t - ig.run_max_s]
-        test = self._run_test(flt)
         if test is not None and not test["white"]:
             self.run = self.run[-1:]           # a scattered run starts again from this fix
+            ep.t_fault = t                     # … and the fault was there until now
         if not in_gate:
             ep.rejected += 1
         if test is None:
@@ -494,14 +496,14 @@ class FaultBank:
                     p_fault * (np.outer(pred, pred) + C_f))
         return why, None
 
-    def _ins_lost(self, ep, flt, t):
+    def _ins_lost(self, ep, flt, t, test):
         """The other side of the bank: the INS, not the GNSS, is lost — ``(reason, track)``
         or None. The last ``reinit_after_s`` of fixes must look healthy by themselves (their
         second differences as a car's, :func:`selfnav.ins.align.healthy_start`: not white or
-        Gauss–Markov outliers) and move fast enough to give a course, and either the dead
-        reckoning's σ has grown past ``reinit_sigma_ratio`` times the fixes' (it has nothing
-        left to add) while the fixes stand outside its envelope (the bank's gate) and the fault
-        seen at the onset does not explain them better, or the
+        Gauss–Markov outliers) and move fast enough to give a course, and either the run test
+        (:mod:`selfnav.ins.runtest`) finds them healthy fixes of a dead reckoning off by more
+        than its covariance says, by ``ln(1/α)`` over health and every fault model, outside
+        its envelope (the bank's gate) and not as the fault seen at the onset would be, or the
         episode has outlasted ``max_fault_s`` (the longest GNSS fault the navigator holds out
         against: seed 004's five minutes) with no reference left to say otherwise."""
         from selfnav.ins.align import healthy_start
@@ -517,18 +519,17 @@ class FaultBank:
         if healthy_start(tt, P, sig, window=len(tr) - 2) is None:
             return None
         s_fix = float(np.median(sig))
-        # the course over the last seconds
-        last = tt >= tt[-1] - ig.velocity_span_s * 2.5
-        tl = tt[last] - tt[-1]
+        # moving, with a course: the velocity at the last fix from a quadratic through the
+        # track (the restart's heading; a wide one is split into hypotheses)
+        tl = tt - tt[-1]
         A = np.column_stack([np.ones_like(tl), tl, tl * tl])
-        coef, *_ = np.linalg.lstsq(A, P[last], rcond=None)
+        coef, *_ = np.linalg.lstsq(A, P, rcond=None)
         s_v = s_fix * float(np.sqrt(np.linalg.inv(A.T @ A)[1, 1]))
-        if np.hypot(*coef[1]) < max(self.cfg.init.reinit_speed, 4.0 * s_v):
+        if np.hypot(*coef[1]) < max(self.cfg.init.reinit_speed, 2.0 * s_v):
             return None
-        s_ins = float(np.sqrt(max(np.linalg.eigvalsh(flt.P[:2, :2])[-1], 0.0)))
         long = t - ep.t_start >= ig.max_fault_s and not self.mature(t)
         if not long:
-            if s_ins < ig.reinit_sigma_ratio * s_fix:
+            if test is None or test["log_lost"] < -math.log(ig.p_false_alarm):
                 return None
             o = np.array([f.offset for f in tr[-ig.run_min_fixes:]]).mean(axis=0)
             if float(o @ np.linalg.solve(flt.P[:2, :2], o)) <= self.gate:
@@ -536,12 +537,9 @@ class FaultBank:
                 # INS is lost (a slow drag sits there after a minute of dead reckoning); the
                 # run is fused with the fault's offset in its σ instead (_fault_continues)
                 return None
-            if ep.fault is not None:
-                _, llr = self._fault_llr(ep, flt, o, s_fix**2 / ig.run_min_fixes, t)
-                if llr > 0.0:
-                    return None
         why = (f"the episode outlasted {ig.max_fault_s:.0f} s" if long else
-               f"its σ {s_ins:.0f} m is {s_ins / s_fix:.0f}× theirs")
+               f"the dead reckoning is off by more than its σ (log Bayes factor "
+               f"{test['log_lost']:+.1f} over health and faults)")
         return (f"the INS was lost: {len(tr)} fixes over {tt[-1] - tt[0]:.0f} s agree with each "
                 f"other and {why}: restarted from them", list(tr))
 
@@ -584,19 +582,25 @@ class FaultBank:
         idx = [0, 1, 3, 4, 8]
         ev = run_evidence(tt, o, sig, p_ins, flt.P[np.ix_(idx, idx)], flt.acceleration_sigma(),
                           float(np.mean(flt.white_velocity_density()[:2])), ig,
-                          fix_sigma=float(np.median(sig)))
+                          fix_sigma=float(np.median(sig)),
+                          fault_age=(tt[-1] - self.episode.t_start) if self.episode else 0.0)
         bf = ev["healthy"] - ev["fault"]
-        d = tt[-1] - (self.episode.t_start if self.episode is not None else tt[0])
+        # decisively faulty: the faults beat health and a lost INS alike
+        faulty = ev["fault"] - max(ev["healthy"], ev["lost"])
+        ep = self.episode
+        t_f = tt[0] if ep is None else (ep.t_fault if ep.t_fault is not None else ep.t_start)
+        d = tt[-1] - t_f
         prior = math.log(math.expm1(min(max(d, 1e-3) / ig.fault_mean_s, 50.0)))
         threshold = -math.log(ig.p_false_alarm)
-        white = bf > -threshold
+        white = faulty < threshold
         moves = bf + prior >= threshold
         n, dur = len(run), tt[-1] - tt[0]
         if not white:
             why = f"the fixes look faulty ({strongest_fault(ev)}; log Bayes factor {bf:+.1f})"
         elif not moves:
             why = (f"{n} fixes over {dur:.0f} s not yet healthy (log Bayes factor {bf:+.1f}, "
-                   f"prior {prior:+.1f}, against {strongest_fault(ev)})")
+                   f"prior {prior:+.1f}, against {strongest_fault(ev)}; INS lost "
+                   f"{ev['lost'] - max(ev['healthy'], ev['fault']):+.1f})")
         else:
             why = f"{n} fixes over {dur:.0f} s healthy (log Bayes factor {bf:+.1f})"
         # the offset and its rate now (a quadratic through the offsets, weighted by the fixes'

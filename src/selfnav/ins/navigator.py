@@ -397,8 +397,6 @@ class Navigator:
                          ("nis_h", np.nan), ("nis_v", np.nan), ("nis_vel", np.nan),
                          ("excluded", False)):
             self.log[key].append(val)
-        if self.road_aid is not None:
-            self.road_aid.add_fix(fx.t, fx.lat, fx.lon, s_file)
         if self.flt is None:
             self.startup.add_fix(fx)
             self.log["status"][fx.index] = FixStatus.ALIGNING
@@ -705,12 +703,22 @@ class Navigator:
             if f is flt:
                 self._dx = self._dx + dx
         self.bank.on_outage(te, self._t_last_fix)
-        if self._hyp is not None:
-            return             # no map, references or time-offset search until resolved
         if self.road_aid is not None:
-            m = self.road_aid(te, flt)
-            if m is not None:
-                self._dx = self._dx + m
+            self.road_aid.dead_reckoning = (self.bank.episode is not None
+                                            or te - self._t_last_fused > self.cfg.integrity.outage_s)
+            if self._hyp is None:
+                m = self.road_aid(te, flt)
+                if m is not None:
+                    self._dx = self._dx + m
+            else:
+                # the map's cloud follows M; its constraints go to every heading hypothesis
+                meas = self.road_aid.constraints(te, flt)
+                for f in self._filters():
+                    dx = self.road_aid.apply(meas, f)
+                    if f is flt:
+                        self._dx = self._dx + dx
+        if self._hyp is not None:
+            return             # no references or time-offset search until resolved
         self.bank.maintain(te, flt)
         if flt.layout.toff is not None:
             self._check_time_offset(te)
@@ -813,7 +821,16 @@ class Navigator:
         nis_v = float(m.r[2] ** 2 / S3[2, 2])
         if self._fix_dt:
             self.bank.fix_dt = self._fix_dt_median
-        v = self.bank.judge(flt, mh, fx.t, (fx.lat, fx.lon))
+        if self._hyp is not None:
+            # judged against the whole sum: M with the sum's covariance about it (M's own is
+            # one hypothesis' — narrower than what the navigator knows)
+            judge_flt = flt.copy()
+            judge_flt.P = self._hyp.covariance_about(self._m_index())
+            mh = PositionFix(fx.t, fx.lat, fx.lon, fx.h, fx.sigma_h,
+                             fx.sigma_v).model(judge_flt).rows([0, 1])
+            v = self.bank.judge(judge_flt, mh, fx.t, (fx.lat, fx.lon))
+        else:
+            v = self.bank.judge(flt, mh, fx.t, (fx.lat, fx.lon))
         if self._hyp is not None:
             # the heading hypotheses: the bank judges the fix on M (its χ² gate and its
             # episodes: outliers while the heading is resolved); a plain "used" goes into
@@ -823,11 +840,9 @@ class Navigator:
             if plain and v.apply:
                 self._hypotheses_fix(fx)
                 return
-            if plain and self.bank.episode is None:
+            if plain:
                 self._log(fx, v.status, v.reason, v.nis, nis_v, np.nan)
                 return
-            # a fault episode: no fix will resolve the heading while it lasts, and the dead
-            # reckoning's envelope must be the whole sum's (its covariance about M), not M's
             self._collapse_hypotheses(fx.t)
             flt = self.flt
             m = PositionFix(fx.t, fx.lat, fx.lon, fx.h, fx.sigma_h, fx.sigma_v).model(flt)
@@ -869,6 +884,11 @@ class Navigator:
             self._t_last_fused = fx.t
             if self.adapter is not None and self.bank.episode is None:
                 self.adapter.on_fix(flt, v.nis, 2)
+            if self.road_aid is not None:
+                # the map's cloud takes the fixes the navigator takes, as it takes them (a
+                # fault's fixes fed to it led it to other roads, and the filter after it)
+                s_h = fx.sigma_h if v.add_R is None else math.sqrt(fx.sigma_h**2 + v.add_R[0, 0])
+                self.road_aid.add_fix(fx.t, fx.lat, fx.lon, s_h)
         nis_vel = np.nan
         if fx.velocity_n is not None and cfg.gnss.use_velocity:
             mv = VelocityFix(fx.t, fx.velocity_n, fx.sigma_vel, fx.sigma_vel_up).model(flt)
@@ -922,6 +942,8 @@ class Navigator:
         nis, used, nis_v, nis_vel = info[id(self.flt)]
         if used:
             self._t_last_fused = fx.t
+            if self.road_aid is not None:
+                self.road_aid.add_fix(fx.t, fx.lat, fx.lon, fx.sigma_h)
         w = float(np.max(hyp.weights))
         why = (f"heading hypotheses: {len(hyp.filters)} left, the best at "
                f"{np.degrees(hyp.deltas[hyp.best]):+.0f}° holds {w:.2f}")
@@ -985,6 +1007,10 @@ class Navigator:
         self._reset_flag = True
         self._t_last_fused = fx.t
         self.counts["reinitialisations"] += 1
+        # a course from noisy fixes: a heading outside the filter's range is split again
+        self._hyp = split_heading(flt, cfg)
+        if self._hyp is not None:
+            self.flt = self._hyp.filters[self._hyp.best]
 
     def _log(self, fx, status, reason, nis_h, nis_v, nis_vel):
         k = fx.index

@@ -18,8 +18,9 @@ likelihood, Gaussian and linear in its parameters, so in closed form:
     healthy, plus white errors of σ ``s`` — outliers;
 ``Gauss–Markov`` (σ ``s``, correlation time ``τ``)
     healthy, plus a correlated error ``s² e^{−|Δt|/τ}`` — multipath, a wandering receiver;
-``ramp`` (offset σ ``s``, rate σ ``r``)
-    healthy, plus an offset and a rate of its own — a drag, a jump;
+``ramp`` (rate σ ``r``)
+    healthy, plus a rate of its own and the offset that rate built since the fault began — a
+    drag;
 ``lost``
     the fixes healthy, the dead reckoning off by much more than ``P`` says (offset σ
     ``lost_m``, rate σ ``lost_mps`` added to its prior): the INS, not the GNSS, failed.
@@ -61,7 +62,7 @@ def _logmeanexp(x) -> float:
 
 
 def run_evidence(tt, o, sigma, p_ins, P_rvh, acc_sigma, q_v, ig, *, fix_sigma: float,
-                 max_fixes: int = 30) -> dict:
+                 fault_age: float = 0.0, max_fixes: int = 30) -> dict:
     """Log marginal likelihoods of a run of offsets under each hypothesis (module docstring).
 
     Parameters
@@ -76,6 +77,8 @@ def run_evidence(tt, o, sigma, p_ins, P_rvh, acc_sigma, q_v, ig, *, fix_sigma: f
     ig : :class:`selfnav.ins.config.Integrity` (the fault families, ``lost_m``, ``lost_mps``)
     fix_sigma : m, the fixes' σ the white and Gauss–Markov families scale with (a fault is an
         error several times the receiver's own)
+    fault_age : s since the fault began (the episode's start): a drag's offset is its rate
+        times that
     max_fixes : the run is thinned evenly to at most this many fixes (cost)
 
     Returns
@@ -126,8 +129,9 @@ def run_evidence(tt, o, sigma, p_ins, P_rvh, acc_sigma, q_v, ig, *, fix_sigma: f
             each[f"Gauss–Markov {s:.3g} m / {tc:g} s"] = _loglik(
                 y, C0 + np.kron(s * s * np.exp(-dtm / tc), I2))
             carry[f"Gauss–Markov {s:.3g} m / {tc:g} s"] = s * s * n / (1.0 + span / tc)
+    age = max(float(fault_age), ig.fault_ramp_onset_s)
     for r in ig.fault_ramp_mps:
-        Sr = np.diag([r * ig.fault_ramp_onset_s] * 2 + [r] * 2) ** 2
+        Sr = np.diag([r * age] * 2 + [r] * 2) ** 2
         each[f"ramp {r:g} m/s"] = _loglik(y, C0 + A[:, :4] @ Sr @ A[:, :4].T)
         carry[f"ramp {r:g} m/s"] = (r * ig.fault_ramp_onset_s) ** 2 * n
     fam = {}
@@ -143,6 +147,8 @@ def run_evidence(tt, o, sigma, p_ins, P_rvh, acc_sigma, q_v, ig, *, fix_sigma: f
     SL = S.copy()
     SL[:4, :4] += np.diag([ig.lost_m ** 2] * 2 + [ig.lost_mps ** 2] * 2)
     SL[4, 4] += ig.lost_rad ** 2
+    SL[5, 5] += ig.lost_mps2 ** 2
+    SL[6, 6] += ig.lost_mps2 ** 2
     out["lost"] = _loglik(y, A @ SL @ A.T + np.diag(noise))
     out["each"] = each
     return out

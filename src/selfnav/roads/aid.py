@@ -141,6 +141,12 @@ class EkfRoadAid:
     seed : random stream
     lock_m : the filter is on the road when its last constraint found it within this, m
     sigma_corner : σ of a corner fix along and across the road, m (:meth:`_corner_fix`)
+    While the navigator takes no fixes (``dead_reckoning``: a fault episode, an outage) the
+    cloud follows the dead reckoning and no constraint is given but the level-road prior.
+    max_sigma_m : no road constraint while the filter's horizontal position σ (its largest
+        axis) is above this, m: a fact of road maps — junctions 50–100 m apart — beyond which
+        the cloud cannot tell the road the car is on from the one its dead reckoning drifted
+        to (simulated drives: a map-aided dead reckoning 900 m off at σ 10 m)
     q_along : (m/s)²/s, along-track speed variance added while the cloud judges GNSS
         unhealthy (:meth:`_widen_along`; None: off)
     curve_sigma : σ of the cross-track constraint while turning through a gentle curve (no
@@ -153,7 +159,7 @@ class EkfRoadAid:
                  sigma_cross=1.0, sigma_arc=1.0, sigma_heading=np.radians(5.0), interval=1.0,
                  agree_m=10.0, arc_agree_m=4.0, bend_zone=25.0, grade_sigma=0.08, seed=0,
                  lock_m=5.0,
-                 sigma_corner=2.5, q_along=0.01, curve_sigma=None):
+                 sigma_corner=2.5, q_along=0.01, curve_sigma=None, max_sigma_m=30.0):
         self.g = graph
         self.pf = RoadParticles(graph, cfg, seed)
         self.fix_t, self.fix_xy, self.sig = [], [], []     # the fixes as they arrive
@@ -185,6 +191,10 @@ class EkfRoadAid:
         self.turn = None           # the turn being driven: {"t0", "t_calm"}
         self.corner_log = []       # (t, correction E, N) of each corner fix
         self.lock_m = lock_m
+        self.max_sigma_m = max_sigma_m
+        #: set by the navigator while the fixes are not taken (a fault episode, an outage):
+        #: the map then gives no constraint (:meth:`constraints`)
+        self.dead_reckoning = False
         self.lock = None           # (t, normal) of the last constraint that found the filter on it
 
     # ------------------------------------------------------------------ the stream
@@ -207,10 +217,17 @@ class EkfRoadAid:
     def __call__(self, t, flt):
         """The map's constraints at an aiding epoch, applied to ``flt`` (gated, χ² 0.999 as
         each says); returns the error-state correction (zeros when nothing applied)."""
-        meas = self.constraints(t, flt)
+        return self.apply(self.constraints(t, flt), flt)
+
+    @staticmethod
+    def apply(meas, flt):
+        """Apply measurements of :meth:`constraints` to a filter (each gated, χ² 0.999, as it
+        says); returns the error-state correction. ``meas`` is not changed (the same epoch's
+        constraints can go to several filters: the heading hypotheses of a start)."""
         dx = np.zeros(flt.nx)
         for m in meas:
             if isinstance(m, dict):
+                m = dict(m)
                 gate = m.pop("gate", True)
                 m = RoadLine(**m)
             else:
@@ -368,6 +385,17 @@ class EkfRoadAid:
         if legs is not None:
             share = max(share, self._line_weight(legs, w, pos))
         self.history.append((t, *est["xy"], est["seg"], est["spread"], share))
+        if self.dead_reckoning:
+            # the fixes are not taken (a fault episode, an outage): the cloud follows the dead
+            # reckoning and cannot vouch for a road — its lines and corners turned a filter
+            # onto the next road at a junction and made it sure of it (simulated drives: 300 m
+            # off at σ 10 m); the map holds nothing until fixes are taken again
+            return meas
+        if float(np.sqrt(max(np.linalg.eigvalsh(flt.P[0:2, 0:2])[-1], 0.0))) > self.max_sigma_m:
+            # the filter is too unsure of its position for the map to say which road it is on
+            # (a cloud that follows its dead reckoning takes the junction its speed error
+            # picks, and the constraints would then make it sure of the wrong road)
+            return meas
         if corner is not None:
             self.t_constraint = t
             if np.hypot(*(est["xy"] - corner.pop("target"))) > 15.0:
