@@ -387,6 +387,10 @@ class Integrity:
     fault_white_sigmas : the white-outlier family of the run test
         (:mod:`selfnav.ins.runtest`): σ of the outliers, in fix σ (a fact of GNSS faults:
         multipath to a wrong lock, 3–100× the receiver's own noise)
+    fault_min_m : the fault families scale with the fixes' σ but not below this, m (a fact:
+        faults worth a dead reckoning are metres; below, an RTK fix's discrepancies are the
+        navigator's own model — lever arm, timing — and 0.3 m "faults" kept clean RTK fixes
+        out for minutes after a window on drive_0708)
     fault_gm_sigmas, fault_gm_s : the correlated family: σ (in fix σ) and correlation times,
         s, of errors that wander (multipath, a receiver's slow loss of lock)
     fault_ramp_mps : the ramp family: the rates of a drag, m/s (a spoofer's, a receiver
@@ -423,6 +427,7 @@ class Integrity:
     reinit_after_s: float = 20.0
     max_fault_s: float = 300.0
     fault_white_sigmas: tuple = (3.0, 10.0, 30.0, 100.0)
+    fault_min_m: float = 1.0
     fault_gm_sigmas: tuple = (3.0, 10.0, 30.0)
     fault_gm_s: tuple = (2.0, 10.0, 30.0)
     fault_ramp_mps: tuple = (0.5, 3.0)

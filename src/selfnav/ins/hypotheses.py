@@ -582,7 +582,7 @@ class FaultBank:
         idx = [0, 1, 3, 4, 8]
         ev = run_evidence(tt, o, sig, p_ins, flt.P[np.ix_(idx, idx)], flt.acceleration_sigma(),
                           float(np.mean(flt.white_velocity_density()[:2])), ig,
-                          fix_sigma=float(np.median(sig)),
+                          fix_sigma=max(float(np.median(sig)), ig.fault_min_m),
                           fault_age=(tt[-1] - self.episode.t_start) if self.episode else 0.0)
         bf = ev["healthy"] - ev["fault"]
         # decisively faulty: the faults beat health and a lost INS alike
@@ -593,7 +593,12 @@ class FaultBank:
         prior = math.log(math.expm1(min(max(d, 1e-3) / ig.fault_mean_s, 50.0)))
         threshold = -math.log(ig.p_false_alarm)
         white = faulty < threshold
-        moves = bf + prior >= threshold
+        # health again: it beats the scattered faults (white, Gauss–Markov) by ln(1/α) with the
+        # prior odds that the fault has ended, and no drag beats it by as much — a drag the
+        # dead reckoning cannot tell from its own drift sits inside its envelope (taken, it
+        # moves the filter no further than the envelope allows); a faster one does not
+        moves = (ev["healthy"] - ev["scattered"] + prior >= threshold
+                 and ev["ramp"] - ev["healthy"] < threshold)
         n, dur = len(run), tt[-1] - tt[0]
         if not white:
             why = f"the fixes look faulty ({strongest_fault(ev)}; log Bayes factor {bf:+.1f})"

@@ -83,8 +83,9 @@ def run_evidence(tt, o, sigma, p_ins, P_rvh, acc_sigma, q_v, ig, *, fix_sigma: f
 
     Returns
     -------
-    dict with ``healthy``, ``fault`` (the faults' mixture), ``lost`` and ``each`` (every fault
-    model's value, for the reasons).
+    dict with ``healthy``, ``fault`` (the faults' mixture), ``scattered`` (white and
+    Gauss–Markov), ``ramp`` (the drags), ``lost``, ``fault_variance`` and ``each`` (every
+    fault model's value, for the reasons).
     """
     tt = np.asarray(tt, float)
     o = np.asarray(o, float)
@@ -140,6 +141,9 @@ def run_evidence(tt, o, sigma, p_ins, P_rvh, acc_sigma, q_v, ig, *, fix_sigma: f
     logprior = {k: -math.log(len(fam)) - math.log(len(ks)) for ks in fam.values() for k in ks}
     lw = np.array([each[k] + logprior[k] for k in each])
     out["fault"] = float(np.max(lw) + math.log(np.sum(np.exp(lw - np.max(lw)))))
+    for name, fams in (("scattered", ("white", "Gauss–Markov")), ("ramp", ("ramp",))):
+        ks = [k for f in fams for k in fam.get(f, [])]
+        out[name] = _logmeanexp([each[k] for k in ks]) if ks else -np.inf
     # the variance the faults that still explain the run ask a fused fix to carry (their
     # posterior within the family mixture)
     w = np.exp(lw - out["fault"])
