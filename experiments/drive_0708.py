@@ -18,9 +18,10 @@ makes); only the GNSS is edited:
   reaches its time (a receiver's latency; 0.5 s with the offset given, −0.2 s, so that every
   fix comes late);
 * ``--cut``: causality — the files cut at several times T, the rows up to T against the whole
-  run's (with and without a drag after T).
+  run's (with and without a drag after T);
+* ``--stream``: :class:`selfnav.Navigator` fed one IMU sample a call against the batch call.
 
-    python experiments/drive_0708.py [DATA_FOLDER] [--grades] [--scan [--heldout] [-v]] [--cut] [--latency]
+    python experiments/drive_0708.py [DATA_FOLDER] [--grades] [--scan [--heldout] [-v]] [--cut] [--latency] [--stream]
 """
 from __future__ import annotations
 
@@ -188,6 +189,36 @@ def stream_late(folder=DEFAULT_FOLDER, latency=0.2, **options):
     return float(np.sqrt(np.mean(e**2))), float(e.max())
 
 
+def stream_equal(folder=DEFAULT_FOLDER):
+    """Largest difference (m) between the rows of :class:`selfnav.Navigator` fed one IMU
+    sample a call, each fix handed over when the IMU's stamps reach its time (the loop of
+    docs/realtime.md), and the rows of ``selfnav.navigate`` on the same files."""
+    import math
+
+    imu, g = load(folder)
+    batch = selfnav.navigate(imu, g).trajectory
+    nav = selfnav.Navigator()
+    k = 0
+
+    def col(x, i):
+        return None if x is None else x[i]
+
+    for i in range(len(imu.t)):
+        while k < len(g.t) and g.t[k] <= imu.t[i]:
+            nav.add_fix(g.t[k], math.degrees(g.lat[k]), math.degrees(g.lon[k]), g.h[k],
+                        col(g.sigma_m, k), col(g.velocity_n, k), col(g.quality, k),
+                        sigma_v_m=col(g.sigma_v_m, k), sigma_vel_mps=col(g.sigma_vel_mps, k))
+            k += 1
+        nav.add_imu(imu.t[i], imu.omega_ib_b[i], imu.f_ib_b[i])
+    nav.finish()
+    a = nav.result().trajectory
+    if len(a.t) != len(batch.t) or not np.allclose(a.t, batch.t):
+        return float("inf")
+    rm, rn = radii(batch.lat)
+    return float(np.max(np.hypot((a.lat - batch.lat) * rm,
+                                 (a.lon - batch.lon) * rn * np.cos(batch.lat))))
+
+
 def _fmt(name, m):
     s = f"{name:28s} RMS {m['rms_m']:7.3f} max {m['max_m']:7.2f}"
     if "window_rms_m" in m:
@@ -216,6 +247,10 @@ def main(argv):
         print("clean, largest row difference before the cut (m):", causality(folder))
         print("drag after the cut, largest row difference before it (m):",
               causality(folder, kind="drag"))
+        return
+    if "--stream" in argv:
+        print(f"one IMU sample a call against the batch call: rows equal to "
+              f"{stream_equal(folder):.2g} m")
         return
     if "--latency" in argv:
         for lat, opts in ((0.0, {}), (0.2, {}), (0.5, {"imu_time_offset_s": -0.2})):

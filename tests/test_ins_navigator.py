@@ -45,17 +45,16 @@ def _rows_equal(a, b, n=None):
 
 
 def test_sample_by_sample_equals_batch(graph):
-    """One IMU sample a call, each fix handed over before the IMU reaches its time (a receiver
-    ahead of the IMU, as the batch call hands them over), gives the rows of the batch call to
-    1 mm; every add_imu returns a NavState. (A fix handed over after the IMU passed its time
-    cannot change the rows already out: docs/realtime.md and its test.)"""
+    """One IMU sample a call, each fix handed over when the IMU's stamps reach its time (as
+    docs/realtime.md does; the batch call hands them over in the same order), gives the rows
+    of the batch call to 1 mm; every add_imu returns a NavState."""
     imu, g, truth = _drive(graph, 4, duration=160.0)
     batch = selfnav.navigate(imu, g)
     nav = Navigator()
     k = 0
     states = []
     for i in range(len(imu.t)):
-        while k < len(g.t) and g.t[k] <= imu.t[i] + 0.5:
+        while k < len(g.t) and g.t[k] <= imu.t[i]:
             d = nav.add_fix(g.t[k], np.degrees(g.lat[k]), np.degrees(g.lon[k]), g.h[k],
                             g.sigma_m[k])
             assert d.status in set(FixStatus)

@@ -343,12 +343,17 @@ class Navigator:
                 i = j
                 self._maybe_start()
                 continue
-            grid = st.next_attempt(t[i] + self.offset_applied)
+            # the attempt grid is kept between calls: one sample a call reaches a grid point
+            # with the first sample past it, as a chunk does (real stamps are never on it)
+            if st.grid is None:
+                st.grid = st.next_attempt(t[i] + self.offset_applied)
+            grid = st.grid
             j = i + int(np.searchsorted(t[i:] + self.offset_applied, grid - 1e-12, side="left")) + 1
             j = min(j, len(t))
             st.add_imu(t[i:j], w[i:j], f[i:j])
             i = j
             if st.t_imu >= grid - 1e-9:
+                st.grid = st.next_attempt(st.t_imu + 1e-9)
                 self._maybe_start()
         if i < len(t):
             self._feed(t[i:], w[i:], f[i:], dt[i:])
@@ -746,11 +751,14 @@ class Navigator:
         from selfnav.types import GnssData, ImuData
 
         t_min = t - st.time_offset_window_s
-        while self._hist and self._hist[0][0][-1] < t_min - flt.time_offset_applied:
-            self._hist.pop(0)
-        tt = np.concatenate([h[0] for h in self._hist]) + flt.time_offset_applied
-        imu = ImuData(tt, np.concatenate([h[1] for h in self._hist]),
-                      np.concatenate([h[2] for h in self._hist]))
+        # the window by sample, not by the blocks the samples came in (the same search
+        # whether the IMU is fed a sample or a second at a time); kept as one block
+        tt = np.concatenate([h[0] for h in self._hist])
+        keep = tt >= t_min - flt.time_offset_applied
+        self._hist = [(tt[keep], np.concatenate([h[1] for h in self._hist])[keep],
+                       np.concatenate([h[2] for h in self._hist])[keep])]
+        tt = self._hist[0][0] + flt.time_offset_applied
+        imu = ImuData(tt, self._hist[0][1], self._hist[0][2])
         # only fixes the navigator fused (a drag's fixes would pull the search with them)
         fx = [f for f in self.fixes if t_min <= f.t <= t
               and FixStatus(self.log["status"][f.index]).fused and not self.log["excluded"][f.index]]
@@ -1260,43 +1268,59 @@ class Navigator:
 
 
 def feed(nav: Navigator, imu, gnss=None, *, odometer=None, progress=None,
-         chunk: int = 2000, lead_s: float = 1.0) -> Navigator:
-    """Feed whole records to a navigator in time order — the batch run of
+         chunk: int = 2000) -> Navigator:
+    """Feed whole records to a navigator in the real-time order — the batch run of
     :func:`selfnav.navigate` — and finish it.
 
-    The IMU goes in chunks of ``chunk`` samples; fixes, wheel speed and magnetometer samples
-    (the IMU's ``mag_b`` columns) are added ``lead_s`` ahead of the IMU (queued: nothing acts
-    before the IMU reaches its time, so the chunking does not change the result).
-    ``progress(fraction)`` is called after each chunk.
+    Each fix, wheel-speed and magnetometer sample (the IMU's ``mag_b`` columns) is handed over
+    just before the first IMU sample whose stamp reaches its time, as the loop of
+    docs/realtime.md does sample by sample; between them the IMU goes in chunks of at most
+    ``chunk`` samples (the chunking does not change the result: one sample a call gives the
+    same rows). ``progress(fraction)`` is called after each chunk.
     """
     n = len(imu.t)
-    k = ko = km = 0
+    off = nav.offset_applied
+    ts = np.asarray(imu.t, float) + off
     ng = 0 if gnss is None else len(gnss.t)
     no = 0 if odometer is None else len(odometer.t)
-    off = nav.offset_applied
     mag = getattr(imu, "mag_b", None)
     mag_step = max(1, int(round(nav.cfg.vehicle.mag_step / imu.dt))) if mag is not None and n > 1 else 0
 
     def col(x, i):
         return None if x is None else x[i]
 
-    for i0 in range(0, n, chunk):
-        i1 = min(n, i0 + chunk)
-        t_end = imu.t[i1 - 1] + off + lead_s
-        while k < ng and gnss.t[k] <= t_end:
-            nav.add_fix(gnss.t[k], math.degrees(gnss.lat[k]), math.degrees(gnss.lon[k]),
-                        gnss.h[k], col(gnss.sigma_m, k), col(gnss.velocity_n, k),
-                        col(gnss.quality, k), sigma_v_m=col(gnss.sigma_v_m, k),
-                        sigma_vel_mps=col(gnss.sigma_vel_mps, k))
-            k += 1
-        while ko < no and odometer.t[ko] + off <= t_end:
-            nav.add_odometer(odometer.t[ko] + off, odometer.speed_mps[ko])
-            ko += 1
-        if mag_step:
-            while km < i1 + mag_step and km < n and imu.t[km] + off <= t_end:
-                nav.add_magnetometer(imu.t[km] + off, mag[km])
-                km += mag_step
+    # (the IMU sample each arrives before, order, kind, index)
+    arrivals = []
+    if ng:
+        arrivals += [(int(i), 0, k) for k, i in
+                     enumerate(np.searchsorted(ts, np.asarray(gnss.t, float), side="left"))]
+    if no:
+        arrivals += [(int(i), 1, k) for k, i in
+                     enumerate(np.searchsorted(ts, np.asarray(odometer.t, float) + off,
+                                               side="left"))]
+    if mag_step:
+        arrivals += [(int(i), 2, int(i)) for i in range(0, n, mag_step)]
+    arrivals.sort()
+    a = 0
+    i0 = 0
+    while i0 < n or a < len(arrivals):
+        while a < len(arrivals) and arrivals[a][0] <= i0:
+            _, kind, k = arrivals[a]
+            if kind == 0:
+                nav.add_fix(gnss.t[k], math.degrees(gnss.lat[k]), math.degrees(gnss.lon[k]),
+                            gnss.h[k], col(gnss.sigma_m, k), col(gnss.velocity_n, k),
+                            col(gnss.quality, k), sigma_v_m=col(gnss.sigma_v_m, k),
+                            sigma_vel_mps=col(gnss.sigma_vel_mps, k))
+            elif kind == 1:
+                nav.add_odometer(odometer.t[k] + off, odometer.speed_mps[k])
+            else:
+                nav.add_magnetometer(ts[k], mag[k])
+            a += 1
+        if i0 >= n:
+            break
+        i1 = min(n, i0 + chunk, arrivals[a][0] if a < len(arrivals) else n)
         nav.add_imu(imu.t[i0:i1], imu.omega_ib_b[i0:i1], imu.f_ib_b[i0:i1])
+        i0 = i1
         if progress is not None:
             progress(i1 / n)
     nav.finish()

@@ -73,6 +73,7 @@ class StartUp:
         self.magnetometer = []     # (t, mag_b)
         self.last_error = "no GNSS fix yet"
         self.attempts = 0
+        self.grid = None           # true time of the next start attempt (navigator's)
 
     # ------------------------------------------------------------------ input
     def add_imu(self, t, w, f):
