@@ -133,3 +133,38 @@ def relative_rotations(Q, k, part):  # pragma: no cover - compiled
         out[j - 1] = rotation_log(E)
         prev[:, :] = cur
     return out
+
+
+@njit(cache=True)
+def inv3(A):  # pragma: no cover - compiled
+    """Inverse of a 3×3 matrix by its adjugate (the sensor matrices ``I + S + M``: a call
+    costs a fraction of ``numpy.linalg.inv``'s overhead)."""
+    a, b, c = A[0, 0], A[0, 1], A[0, 2]
+    d, e, f = A[1, 0], A[1, 1], A[1, 2]
+    g, h, i = A[2, 0], A[2, 1], A[2, 2]
+    co0, co1, co2 = e * i - f * h, f * g - d * i, d * h - e * g
+    det = a * co0 + b * co1 + c * co2
+    out = np.empty((3, 3))
+    out[0, 0] = co0 / det
+    out[1, 0] = co1 / det
+    out[2, 0] = co2 / det
+    out[0, 1] = (c * h - b * i) / det
+    out[1, 1] = (a * i - c * g) / det
+    out[2, 1] = (b * g - a * h) / det
+    out[0, 2] = (b * f - c * e) / det
+    out[1, 2] = (c * d - a * f) / det
+    out[2, 2] = (a * e - b * d) / det
+    return out
+
+
+@njit(cache=True)
+def median_abs_second_difference(x):  # pragma: no cover - compiled
+    """Per column of ``x`` (N, 3) the median of ``|x_{k+1} − 2 x_k + x_{k−1}|``."""
+    n = x.shape[0] - 2
+    out = np.empty(x.shape[1])
+    d = np.empty(n)
+    for j in range(x.shape[1]):
+        for k in range(n):
+            d[k] = abs(x[k + 2, j] - 2.0 * x[k + 1, j] + x[k, j])
+        out[j] = np.median(d)
+    return out

@@ -37,6 +37,7 @@ from selfnav import sensors
 from selfnav.allan import allan_deviation
 from selfnav.earth import OMEGA_EARTH, enu_offset, normal_gravity
 from selfnav.ins.config import FilterConfig, ImuNoise
+from selfnav.kernels import median_abs_second_difference
 from selfnav.types import GnssData, ImuData
 from selfnav.units import DEG
 
@@ -148,8 +149,8 @@ def vibration_level(w, f):
         return None
 
     def level(x):
-        d2 = x[2:] - 2.0 * x[1:-1] + x[:-2]
-        s = np.median(np.abs(d2), axis=0) / (0.6744897501960817 * np.sqrt(6.0))
+        s = median_abs_second_difference(np.ascontiguousarray(x, dtype=float)) / (
+            0.6744897501960817 * np.sqrt(6.0))
         return float(np.mean(s * s))
 
     return level(np.asarray(w)), level(np.asarray(f))

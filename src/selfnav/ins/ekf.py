@@ -60,6 +60,7 @@ import numpy as np
 
 from selfnav import attitude as att
 from selfnav.earth import OMEGA_EARTH, WGS84, radii
+from selfnav.kernels import inv3
 from selfnav.ins.config import FilterConfig
 from selfnav.ins.strapdown import Strapdown
 from selfnav.types import Trajectory
@@ -438,8 +439,8 @@ class InsGnssFilter:
         return q
 
     def _sensor_inv(self):
-        self._Tg_inv = np.linalg.inv(sensor_matrix(self.sg, self.mg))
-        self._Ta_inv = np.linalg.inv(sensor_matrix(self.sa, self.ma))
+        self._Tg_inv = inv3(sensor_matrix(self.sg, self.mg))
+        self._Ta_inv = inv3(sensor_matrix(self.sa, self.ma))
 
     def _vib_weights(self):
         """Per-state factors of the vibration scale (gyro: attitude and gyro errors;
@@ -706,6 +707,50 @@ class InsGnssFilter:
 
 
 # ------------------------------------------------------------------------ smoother
+@numba.njit(cache=True)
+def _output_cov(P, C_bn, lever_b, v, lever_col, toff_col):  # pragma: no cover - compiled
+    """``H P Hᵀ`` of :func:`output_covariance` (columns: position, attitude and lever arm when
+    ``lever_col ≥ 0``, the time offset when ``toff_col ≥ 0``)."""
+    cols = np.empty(10, np.int64)
+    H = np.zeros((3, 10))
+    k = 0
+    for i in range(3):
+        cols[k] = i
+        H[i, k] = 1.0
+        k += 1
+    if lever_col >= 0:
+        l_n = C_bn @ lever_b
+        S = np.array([[0.0, -l_n[2], l_n[1]], [l_n[2], 0.0, -l_n[0]], [-l_n[1], l_n[0], 0.0]])
+        for j in range(3):
+            cols[k] = 6 + j
+            for i in range(3):
+                H[i, k] = S[i, j]
+            k += 1
+        for j in range(3):
+            cols[k] = lever_col + j
+            for i in range(3):
+                H[i, k] = C_bn[i, j]
+            k += 1
+    if toff_col >= 0:
+        cols[k] = toff_col
+        for i in range(3):
+            H[i, k] = -v[i]
+        k += 1
+    out = np.zeros((3, 3))
+    for a in range(3):
+        for b in range(a, 3):
+            acc = 0.0
+            for p in range(k):
+                hp = H[a, p]
+                if hp == 0.0:
+                    continue
+                for q in range(k):
+                    acc += hp * P[cols[p], cols[q]] * H[b, q]
+            out[a, b] = acc
+            out[b, a] = acc
+    return out
+
+
 def output_covariance(P, layout: "StateLayout", C_nb, velocity_n, lever_b) -> np.ndarray:
     """ENU covariance (3×3, m²) of the point a row reports, at the row's true time: the
     antenna ``r + C_b^n l`` when the lever arm is estimated, else the IMU (DESIGN §10).
@@ -717,20 +762,11 @@ def output_covariance(P, layout: "StateLayout", C_nb, velocity_n, lever_b) -> np
     lay = layout
     if lay.lever is None and lay.toff is None:
         return P[:3, :3]
-    cols = [0, 1, 2]
-    blocks = [np.eye(3)]
-    if lay.lever is not None:
-        C_bn = np.asarray(C_nb).T
-        l_n = C_bn @ np.asarray(lever_b, float)
-        cols += [6, 7, 8] + list(range(lay.lever.start, lay.lever.stop))
-        blocks += [np.array([[0.0, -l_n[2], l_n[1]], [l_n[2], 0.0, -l_n[0]],
-                             [-l_n[1], l_n[0], 0.0]]), C_bn]
-    if lay.toff is not None:
-        cols.append(lay.toff.start)
-        blocks.append(-np.asarray(velocity_n, float).reshape(3, 1))
-    H = np.hstack(blocks)
-    Ps = P[np.ix_(cols, cols)]
-    return H @ Ps @ H.T
+    return _output_cov(P, np.ascontiguousarray(np.asarray(C_nb, float).T),
+                       np.asarray(lever_b, float).reshape(3),
+                       np.asarray(velocity_n, float).reshape(3),
+                       -1 if lay.lever is None else lay.lever.start,
+                       -1 if lay.toff is None else lay.toff.start)
 
 
 def pack_state(flt) -> np.ndarray:
