@@ -396,6 +396,8 @@ class Integrity:
     fault_ramp_mps : the ramp family: the rates of a drag, m/s (a spoofer's, a receiver
         pulled off), with an offset of ``fault_ramp_onset_s`` times that rate
     fault_ramp_onset_s : s of drag before a ramp is noticed (the offset it carries then)
+    fault_ramp_change_s : the drift family (a smooth drag): s over which its rate changes (its
+        acceleration σ is the rate over this) and the correlation time of its wander
     fault_mean_s : the mean length of a GNSS fault, s: the prior odds that a fault seen ``d`` s
         ago has ended are ``e^{d/T} − 1`` (runs the evidence cannot tell from health are taken
         back after ``T ln(1/α)``; seed 004's windows last 30 s to 5 minutes)
@@ -432,6 +434,7 @@ class Integrity:
     fault_gm_s: tuple = (2.0, 10.0, 30.0)
     fault_ramp_mps: tuple = (0.5, 3.0)
     fault_ramp_onset_s: float = 10.0
+    fault_ramp_change_s: float = 10.0
     fault_mean_s: float = 120.0
     lost_m: float = 1000.0
     lost_mps: float = 10.0

@@ -21,6 +21,11 @@ likelihood, Gaussian and linear in its parameters, so in closed form:
 ``ramp`` (rate σ ``r``)
     healthy, plus a rate of its own and the offset that rate built since the fault began — a
     drag;
+``drift`` (rate σ ``r``)
+    a ramp whose rate changes over ``fault_ramp_change_s`` (an acceleration of σ ``r`` over
+    it) and that wanders about its quadratic by the fault floor — a receiver drifting off
+    smoothly (a second-order Gauss–Markov error); without it the curvature of such a drift
+    was left to ``lost``, and drive_0708 restarted on the drifting fixes, 500 m off;
 ``lost``
     the fixes healthy, the dead reckoning off by much more than ``P`` says (offset σ
     ``lost_m``, rate σ ``lost_mps`` added to its prior): the INS, not the GNSS, failed.
@@ -131,19 +136,28 @@ def run_evidence(tt, o, sigma, p_ins, P_rvh, acc_sigma, q_v, ig, *, fix_sigma: f
                 y, C0 + np.kron(s * s * np.exp(-dtm / tc), I2))
             carry[f"Gauss–Markov {s:.3g} m / {tc:g} s"] = s * s * n / (1.0 + span / tc)
     age = max(float(fault_age), ig.fault_ramp_onset_s)
+    # a drift is a drag that is smooth, not straight: its rate changes over
+    # ``fault_ramp_change_s`` and it wanders about its quadratic by the fault floor (a straight
+    # ramp left a second-order drift's curvature to the INS-lost hypothesis)
+    wander = np.kron(fix_sigma ** 2 * np.exp(-dtm / ig.fault_ramp_change_s), I2)
     for r in ig.fault_ramp_mps:
         Sr = np.diag([r * age] * 2 + [r] * 2) ** 2
         each[f"ramp {r:g} m/s"] = _loglik(y, C0 + A[:, :4] @ Sr @ A[:, :4].T)
         carry[f"ramp {r:g} m/s"] = (r * ig.fault_ramp_onset_s) ** 2 * n
+        Sd = np.diag([r * age] * 2 + [r] * 2 + [0.0] + [r / ig.fault_ramp_change_s] * 2) ** 2
+        each[f"drift {r:g} m/s"] = _loglik(y, C0 + A @ Sd @ A.T + wander)
+        carry[f"drift {r:g} m/s"] = (r * ig.fault_ramp_onset_s) ** 2 * n
     fam = {}
     for k, v in each.items():
         fam.setdefault(k.split(" ")[0], []).append(k)
     logprior = {k: -math.log(len(fam)) - math.log(len(ks)) for ks in fam.values() for k in ks}
     lw = np.array([each[k] + logprior[k] for k in each])
     out["fault"] = float(np.max(lw) + math.log(np.sum(np.exp(lw - np.max(lw)))))
-    for name, fams in (("scattered", ("white", "Gauss–Markov")), ("ramp", ("ramp",))):
-        ks = [k for f in fams for k in fam.get(f, [])]
-        out[name] = _logmeanexp([each[k] for k in ks]) if ks else -np.inf
+    ks = [k for f in ("white", "Gauss–Markov") for k in fam.get(f, [])]
+    out["scattered"] = _logmeanexp([each[k] for k in ks]) if ks else -np.inf
+    # the drags: the straight or the smooth, whichever explains the run better
+    out["ramp"] = max(_logmeanexp([each[k] for k in fam[f]]) if fam.get(f) else -np.inf
+                      for f in ("ramp", "drift"))
     # the variance the faults that still explain the run ask a fused fix to carry (their
     # posterior within the family mixture)
     w = np.exp(lw - out["fault"])

@@ -142,11 +142,16 @@ class EkfRoadAid:
     lock_m : the filter is on the road when its last constraint found it within this, m
     sigma_corner : σ of a corner fix along and across the road, m (:meth:`_corner_fix`)
     While the navigator takes no fixes (``dead_reckoning``: a fault episode, an outage) the
-    cloud follows the dead reckoning and no constraint is given but the level-road prior.
+    cloud follows the dead reckoning: no constraint is given but the level-road prior once the
+    filter's horizontal σ is above ``dr_sigma_m``.
     max_sigma_m : no road constraint while the filter's horizontal position σ (its largest
         axis) is above this, m: a fact of road maps — junctions 50–100 m apart — beyond which
         the cloud cannot tell the road the car is on from the one its dead reckoning drifted
         to (simulated drives: a map-aided dead reckoning 900 m off at σ 10 m)
+    dr_sigma_m : while dead-reckoning, road constraints only below this horizontal σ, m (a
+        cloud that follows the dead reckoning can still tell the road while the filter is sure
+        to a tenth of the junction spacing; beyond, it takes the junction the drift picks:
+        simulated drives 300 m off at σ 10 m — the σ then a lie, issue 18)
     q_along : (m/s)²/s, along-track speed variance added while the cloud judges GNSS
         unhealthy (:meth:`_widen_along`; None: off)
     curve_sigma : σ of the cross-track constraint while turning through a gentle curve (no
@@ -159,7 +164,7 @@ class EkfRoadAid:
                  sigma_cross=1.0, sigma_arc=1.0, sigma_heading=np.radians(5.0), interval=1.0,
                  agree_m=10.0, arc_agree_m=4.0, bend_zone=25.0, grade_sigma=0.08, seed=0,
                  lock_m=5.0,
-                 sigma_corner=2.5, q_along=0.01, curve_sigma=None, max_sigma_m=30.0):
+                 sigma_corner=2.5, q_along=0.01, curve_sigma=None, max_sigma_m=30.0, dr_sigma_m=10.0):
         self.g = graph
         self.pf = RoadParticles(graph, cfg, seed)
         self.fix_t, self.fix_xy, self.sig = [], [], []     # the fixes as they arrive
@@ -192,6 +197,7 @@ class EkfRoadAid:
         self.corner_log = []       # (t, correction E, N) of each corner fix
         self.lock_m = lock_m
         self.max_sigma_m = max_sigma_m
+        self.dr_sigma_m = dr_sigma_m
         #: set by the navigator while the fixes are not taken (a fault episode, an outage):
         #: the map then gives no constraint (:meth:`constraints`)
         self.dead_reckoning = False
@@ -385,13 +391,15 @@ class EkfRoadAid:
         if legs is not None:
             share = max(share, self._line_weight(legs, w, pos))
         self.history.append((t, *est["xy"], est["seg"], est["spread"], share))
-        if self.dead_reckoning:
+        sigma_h = float(np.sqrt(max(np.linalg.eigvalsh(flt.P[0:2, 0:2])[-1], 0.0)))
+        if self.dead_reckoning and sigma_h > self.dr_sigma_m:
             # the fixes are not taken (a fault episode, an outage): the cloud follows the dead
-            # reckoning and cannot vouch for a road — its lines and corners turned a filter
-            # onto the next road at a junction and made it sure of it (simulated drives: 300 m
-            # off at σ 10 m); the map holds nothing until fixes are taken again
+            # reckoning and cannot vouch for a road once the filter is unsure — its lines and
+            # corners turned a filter onto the next road at a junction and made it sure of it
+            # (simulated drives: 300 m off at σ 10 m); the map holds nothing then until fixes
+            # are taken again
             return meas
-        if float(np.sqrt(max(np.linalg.eigvalsh(flt.P[0:2, 0:2])[-1], 0.0))) > self.max_sigma_m:
+        if sigma_h > self.max_sigma_m:
             # the filter is too unsure of its position for the map to say which road it is on
             # (a cloud that follows its dead reckoning takes the junction its speed error
             # picks, and the constraints would then make it sure of the wrong road)
