@@ -798,6 +798,8 @@ class Navigator:
                     f.P[k, k] += (v[k] * d_f) ** 2
                     f.P[3 + k, 3 + k] += (a[k] * d_f) ** 2
                 f.P[8, 8] += (w_z * d_f) ** 2
+            self._reset_flag = True
+            self.counts["time_offset_resets"] += 1
         elif abs(d) > 3.0 * np.hypot(s_tau, s_cur):
             # closer than the search's accuracy but beyond both σ: the state's σ is not honest
             # (the clock drift had absorbed the difference: drive_0708 with its IMU stamps
@@ -808,8 +810,7 @@ class Navigator:
                 f.P[:, i] = 0.0
                 f.P[i, i] = s_cur ** 2 + d * d
                 f.reprior("tdrift")
-            self._reset_flag = True
-            self.counts["time_offset_resets"] += 1
+            self._reset_flag = True        # P changed outside the model: the smoother breaks
 
     def _heading(self, mag_b):
         from selfnav.sensors import magnetic_heading

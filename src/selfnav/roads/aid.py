@@ -164,7 +164,8 @@ class EkfRoadAid:
                  sigma_cross=1.0, sigma_arc=1.0, sigma_heading=np.radians(5.0), interval=1.0,
                  agree_m=10.0, arc_agree_m=4.0, bend_zone=25.0, grade_sigma=0.08, seed=0,
                  lock_m=5.0,
-                 sigma_corner=2.5, q_along=0.01, curve_sigma=None, max_sigma_m=30.0, dr_sigma_m=10.0):
+                 sigma_corner=2.5, q_along=0.01, curve_sigma=None, max_sigma_m=30.0,
+                 dr_sigma_m=10.0):
         self.g = graph
         self.pf = RoadParticles(graph, cfg, seed)
         self.fix_t, self.fix_xy, self.sig = [], [], []     # the fixes as they arrive
@@ -199,7 +200,8 @@ class EkfRoadAid:
         self.max_sigma_m = max_sigma_m
         self.dr_sigma_m = dr_sigma_m
         #: set by the navigator while the fixes are not taken (a fault episode, an outage):
-        #: the map then gives no constraint (:meth:`constraints`)
+        #: the map then gives no constraint once the filter's σ is above ``dr_sigma_m``
+        #: (:meth:`constraints`)
         self.dead_reckoning = False
         self.lock = None           # (t, normal) of the last constraint that found the filter on it
 
