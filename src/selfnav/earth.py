@@ -233,7 +233,14 @@ def enu_offset(lat0, lon0, h0, lat, lon, h, ellipsoid: Ellipsoid = WGS84):
 
 
 def offset_to_geodetic(lat0, lon0, h0, enu, ellipsoid: Ellipsoid = WGS84):
-    """Inverse of :func:`enu_offset`: (lat, lon, h) of ENU offsets (..., 3) from the origin."""
+    """Inverse of :func:`enu_offset`: (lat, lon, h) of ENU offsets (..., 3) from the origin
+    (a fast path for a scalar origin and one offset: the navigator's every output)."""
+    if isinstance(lat0, float) and isinstance(h0, float) and np.shape(enu) == (3,):
+        w = math.sqrt(1.0 - ellipsoid.e2 * math.sin(lat0) ** 2)
+        rn = ellipsoid.a / w + h0
+        rm = ellipsoid.a * (1.0 - ellipsoid.e2) / (w * w * w) + h0
+        e, n, u = (float(x) for x in enu)
+        return lat0 + n / rm, lon0 + e / (rn * math.cos(lat0)), h0 + u
     rm, rn = radii(lat0, h0, ellipsoid)
     enu = np.asarray(enu, dtype=float)
     return (lat0 + enu[..., 1] / rm, lon0 + enu[..., 0] / (rn * np.cos(lat0)), h0 + enu[..., 2])

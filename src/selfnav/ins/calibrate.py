@@ -151,7 +151,7 @@ def vibration_level(w, f):
     def level(x):
         s = median_abs_second_difference(np.ascontiguousarray(x, dtype=float)) / (
             0.6744897501960817 * np.sqrt(6.0))
-        return float(np.mean(s * s))
+        return float((s[0] * s[0] + s[1] * s[1] + s[2] * s[2]) / 3.0)
 
     return level(np.asarray(w)), level(np.asarray(f))
 
@@ -164,8 +164,9 @@ def vibration_scale(level, reference, cap: float):
     ``cap``)."""
     if level is None or reference is None:
         return 1.0, 1.0
-    return tuple(float(min(max(lv / max(ref, 1e-30), 1.0), cap))
-                 for lv, ref in zip(level, reference))
+    (lg, la), (rg, ra) = level, reference
+    return (float(min(max(lg / max(rg, 1e-30), 1.0), cap)),
+            float(min(max(la / max(ra, 1e-30), 1.0), cap)))
 
 
 def _white_density(x, dt):

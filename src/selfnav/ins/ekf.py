@@ -131,9 +131,13 @@ class StateLayout:
 
 # ------------------------------------------------------------------------ compiled kernels
 @numba.njit(cache=True)
-def _propagate_block(P, Phi_acc, Fcc, Fcp, q, h, nsub, track):  # pragma: no cover - compiled
+def _propagate_block(P, Phi_acc, Fcc, Fcp, q, h, nsub, track, i_toff,
+                     i_drift):  # pragma: no cover - compiled
     """``nsub`` steps of ``P ← Φ P Φᵀ + diag(q)`` for the block-structured Φ (module
-    docstring); with ``track`` also ``Φ_acc ← Φ^nsub Φ_acc`` (the smoother's transition)."""
+    docstring); with ``track`` also ``Φ_acc ← Φ^nsub Φ_acc`` (the smoother's transition).
+    With ``i_drift ≥ 0`` the clock drift then carries the time offset over the whole span:
+    ``δτ ← δτ + T δτ̇``, a shear of ``P`` (and of ``Φ_acc``) that commutes with the block
+    transition (no other state depends on ``δτ``)."""
     n = P.shape[0]
     nc = Fcc.shape[0]
     npar = n - nc
@@ -171,6 +175,58 @@ def _propagate_block(P, Phi_acc, Fcc, Fcp, q, h, nsub, track):  # pragma: no cov
             s = 0.5 * (P[i, j] + P[j, i])
             P[i, j] = s
             P[j, i] = s
+    if i_drift >= 0:
+        T = h * nsub
+        for k in range(n):
+            P[i_toff, k] += T * P[i_drift, k]
+        for k in range(n):
+            P[k, i_toff] += T * P[k, i_drift]
+        if track:
+            for k in range(n):
+                Phi_acc[i_toff, k] += T * Phi_acc[i_drift, k]
+
+
+@numba.njit(cache=True)
+def _correct_blocks(dx, bg, ba, sg, sa, mg, ma, mu, lever, isg, isa, img, ima, imu,
+                    ilev):  # pragma: no cover - compiled
+    """``x ← x − δx`` of the sensor and installation blocks in place (the columns of the
+    optional ones, -1 when absent)."""
+    for k in range(3):
+        bg[k] -= dx[9 + k]
+        ba[k] -= dx[12 + k]
+    if isg >= 0:
+        for k in range(3):
+            sg[k] -= dx[isg + k]
+            sa[k] -= dx[isa + k]
+    if img >= 0:
+        for k in range(6):
+            mg[k] -= dx[img + k]
+            ma[k] -= dx[ima + k]
+    if imu >= 0:
+        for k in range(2):
+            mu[k] -= dx[imu + k]
+    if ilev >= 0:
+        for k in range(3):
+            lever[k] -= dx[ilev + k]
+
+
+@numba.njit(cache=True)
+def _q_step(q_white, q_slow, q_fixed, bias_scale, q_scale, h, vib_class, kg,
+            ka):  # pragma: no cover - compiled
+    """The process noise of one sub-step of ``h`` s: ``(q_w + λ_b q_s) λ h + q_f h`` (λ does
+    not scale the installation's random walks ``q_f``), times the vibration factor of the
+    state's sensor (:meth:`InsGnssFilter._vib_classes`)."""
+    n = q_white.shape[0]
+    q = np.empty(n)
+    lh = q_scale * h
+    for i in range(n):
+        v = (q_white[i] + bias_scale * q_slow[i]) * lh + q_fixed[i] * h
+        if vib_class[i] == 1:
+            v *= kg
+        elif vib_class[i] == 2:
+            v *= ka
+        q[i] = v
+    return q
 
 
 @numba.njit(cache=True)
@@ -331,6 +387,21 @@ def nis(P, H, R, r) -> float:
     return float(_nis(P, np.ascontiguousarray(H), np.ascontiguousarray(R), np.asarray(r, float)))
 
 
+@numba.njit(cache=True)
+def _sensor_matrix_inv(scale, offdiag):  # pragma: no cover - compiled
+    """``(I + S + M)⁻¹`` of :func:`sensor_matrix` (a correction's path: one call each)."""
+    T = np.eye(3)
+    for i in range(3):
+        T[i, i] += scale[i]
+    T[0, 1] += offdiag[0]
+    T[0, 2] += offdiag[1]
+    T[1, 0] += offdiag[2]
+    T[1, 2] += offdiag[3]
+    T[2, 0] += offdiag[4]
+    T[2, 1] += offdiag[5]
+    return inv3(T)
+
+
 def sensor_matrix(scale, offdiag) -> np.ndarray:
     """``I + S + M`` of a sensor triad from its scale factors (3,) and the six off-diagonal
     misalignment elements in the order of :data:`OFFDIAG`."""
@@ -406,6 +477,15 @@ class InsGnssFilter:
         self._Fcc = np.zeros((NX, NX))
         self._Fcp = np.zeros((NX, self.nx - NX))
         self._grav = (self.ins.ellipsoid.k_somigliana, self.ins.ellipsoid.m)
+
+        def col(sl):
+            return -1 if sl is None else sl.start - NX
+
+        # the constant arguments of :func:`_fill_F`
+        self._F_args = (self.ins.ellipsoid.a, self.ins.ellipsoid.e2,
+                        0.0 if not np.isfinite(imu.gyro_bias_tau) else 1.0 / imu.gyro_bias_tau,
+                        0.0 if not np.isfinite(imu.accel_bias_tau) else 1.0 / imu.accel_bias_tau,
+                        col(lay.sg), col(lay.sa), col(lay.mg), col(lay.ma))
         self.nhc_lever_b = np.asarray(cfg.vehicle.nhc_lever_b, dtype=float).reshape(3).copy()
         self._sensor_inv()
         q = self._q_density()
@@ -419,6 +499,9 @@ class InsGnssFilter:
             if sl is not None:
                 self._q_fixed[sl] = q[sl]
         self._q_slow = q - self._q_white - self._q_fixed
+        self._vib_class = self._vib_classes()
+        self._block_cols = tuple(-1 if sl is None else sl.start
+                                 for sl in (lay.sg, lay.sa, lay.mg, lay.ma, lay.mu, lay.lever))
 
     # ------------------------------------------------------------------ model
     def _q_density(self):
@@ -439,22 +522,21 @@ class InsGnssFilter:
         return q
 
     def _sensor_inv(self):
-        self._Tg_inv = inv3(sensor_matrix(self.sg, self.mg))
-        self._Ta_inv = inv3(sensor_matrix(self.sa, self.ma))
+        self._Tg_inv = _sensor_matrix_inv(self.sg, self.mg)
+        self._Ta_inv = _sensor_matrix_inv(self.sa, self.ma)
 
-    def _vib_weights(self):
-        """Per-state factors of the vibration scale (gyro: attitude and gyro errors;
-        accelerometer: velocity and accelerometer errors)."""
-        kg, ka = self.vibration
-        w = np.ones(self.nx)
+    def _vib_classes(self):
+        """Which vibration factor scales each state's noise: 1 the gyro's (attitude and gyro
+        errors), 2 the accelerometer's (velocity and accelerometer errors), 0 none."""
+        c = np.zeros(self.nx, dtype=np.int64)
         lay = self.layout
         for sl in (IP, IBG, lay.sg, lay.mg):
             if sl is not None:
-                w[sl] = kg
+                c[sl] = 1
         for sl in (IV, IBA, lay.sa, lay.ma):
             if sl is not None:
-                w[sl] = ka
-        return w
+                c[sl] = 2
+        return c
 
     def white_velocity_density(self) -> np.ndarray:
         """The velocity random-walk density the filter propagates now, (m/s)²/s per axis
@@ -490,19 +572,10 @@ class InsGnssFilter:
 
     def _F(self):
         """The error dynamics at the current state (:func:`_fill_F`)."""
-        cfg, lay = self.cfg, self.layout
         s = self.ins.state_array()
-        g = self.gravity(s[0], s[2])
-        imu = cfg.imu
-
-        def col(sl):
-            return -1 if sl is None else sl.start - NX
-
-        _fill_F(self._Fcc, self._Fcp, s, self._f_n, self._w_b, self._f_b, self.ins.ellipsoid.a,
-                self.ins.ellipsoid.e2, g, OMEGA_EARTH,
-                0.0 if not np.isfinite(imu.gyro_bias_tau) else 1.0 / imu.gyro_bias_tau,
-                0.0 if not np.isfinite(imu.accel_bias_tau) else 1.0 / imu.accel_bias_tau,
-                col(lay.sg), col(lay.sa), col(lay.mg), col(lay.ma))
+        a, e2, inv_tau_g, inv_tau_a, isg, isa, img, ima = self._F_args
+        _fill_F(self._Fcc, self._Fcp, s, self._f_n, self._w_b, self._f_b, a, e2,
+                self.gravity(s[0], s[2]), OMEGA_EARTH, inv_tau_g, inv_tau_a, isg, isa, img, ima)
         return self._Fcc, self._Fcp
 
     def gravity(self, lat, h):
@@ -533,7 +606,7 @@ class InsGnssFilter:
             return
         f_b = sdv / T
         self._f_b = f_b
-        self._f_n = self.ins.C_nb.T @ f_b
+        self._f_n = self.ins.state_array()[6:15].reshape(3, 3) @ f_b     # C_bn f^b
         self._w_b = sth / T
         self._kin.append((float(T), self.acceleration_n))
         if len(self._kin) > KINEMATIC_BLOCKS:
@@ -580,21 +653,19 @@ class InsGnssFilter:
         """Covariance over ``T`` seconds at the current state (sub-steps of ``cov_step``)."""
         nsub = max(1, int(math.ceil(T / self.cfg.cov_step - 1e-9)))
         h = T / nsub
-        q = (self._q_white + self.bias_scale * self._q_slow) * (self.q_scale * h) + self._q_fixed * h
-        if self.vibration[0] != 1.0 or self.vibration[1] != 1.0:
-            q = q * self._vib_weights()
+        q = _q_step(self._q_white, self._q_slow, self._q_fixed, self.bias_scale, self.q_scale, h,
+                    self._vib_class, self.vibration[0], self.vibration[1])
         Fcc, Fcp = self._F()
-        _propagate_block(self.P, self._Phi_acc, Fcc, Fcp, q, h, nsub, self.track_transition)
         lay = self.layout
         if lay.tdrift is not None:
-            # the clock drift carries the time offset: δτ ← δτ + T δτ̇ (a shear of P that
-            # commutes with the block transition: no other state depends on δτ)
+            # the clock drift carries the time offset: δτ ← δτ + T δτ̇ (and its covariance,
+            # in the kernel)
             i, j = lay.toff.start, lay.tdrift.start
             self.time_offset += self.clock_drift * T
-            self.P[i, :] += T * self.P[j, :]
-            self.P[:, i] += T * self.P[:, j]
-            if self.track_transition:
-                self._Phi_acc[i, :] += T * self._Phi_acc[j, :]
+        else:
+            i = j = -1
+        _propagate_block(self.P, self._Phi_acc, Fcc, Fcp, q, h, nsub, self.track_transition,
+                         i, j)
 
     # ------------------------------------------------------------------ updates
     def _correct(self, dx):
@@ -602,23 +673,11 @@ class InsGnssFilter:
         self._n_corr += 1
         _correct_nav(self.ins.state_array(), dx, self.ins.ellipsoid.a, self.ins.ellipsoid.e2,
                      self._n_corr % 100 == 0)
-        self.bg -= dx[IBG]  # δb = estimated − true
-        self.ba -= dx[IBA]
-        sensors = False
-        if lay.sg is not None:
-            self.sg -= dx[lay.sg]
-            self.sa -= dx[lay.sa]
-            sensors = True
-        if lay.mg is not None:
-            self.mg -= dx[lay.mg]
-            self.ma -= dx[lay.ma]
-            sensors = True
-        if sensors:
+        # δb = estimated − true: every sensor and installation block ``x ← x − δx``
+        _correct_blocks(dx, self.bg, self.ba, self.sg, self.sa, self.mg, self.ma, self.mu,
+                        self.lever_b, *self._block_cols)
+        if lay.sg is not None or lay.mg is not None:
             self._sensor_inv()
-        if lay.mu is not None:
-            self.mu -= dx[lay.mu]
-        if lay.lever is not None:
-            self.lever_b -= dx[lay.lever]
         if lay.toff is not None:
             self.time_offset -= float(dx[lay.toff.start])
         if lay.tdrift is not None:

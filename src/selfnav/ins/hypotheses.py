@@ -165,11 +165,11 @@ class FaultBank:
         veh = self.cfg.vehicle
         for ref in self.refs:
             f = ref.flt
-            k = t > f.ins.t + 1e-12
-            if not k.any():
+            i = int(np.searchsorted(t, f.ins.t + 1e-12, side="right"))   # t is increasing
+            if i == len(t):
                 continue
-            sth, sdv, _ = f.mechanize(t[k], dth[k], dv[k], dt[k])
-            f.propagate(float(dt[k].sum()), sth, sdv)
+            sth, sdv, _ = f.mechanize(t[i:], dth[i:], dv[i:], dt[i:])
+            f.propagate(float(dt[i:].sum()), sth, sdv)
             if still and veh.zupt:
                 f.update(ZeroVelocity(veh.zupt_sigma).model(f))
             elif veh.nhc:
@@ -217,7 +217,8 @@ class FaultBank:
         P = flt.P
         self._end_outage(t)
         S = m_pos.H @ P @ m_pos.H.T + m_pos.R
-        nis = float(m_pos.r @ np.linalg.solve(S, m_pos.r))
+        nis = _quad2(S, m_pos.r) if len(m_pos.r) == 2 else \
+            float(m_pos.r @ np.linalg.solve(S, m_pos.r))
         if not self.cfg.integrity.bank:
             # the plain χ² gate of each fix alone (no references, no episodes): the baseline
             ok = nis <= self.gate
@@ -233,7 +234,7 @@ class FaultBank:
             return Verdict(FixStatus.REJECTED, f"χ² gate (NIS {nis:.3g})", nis)
         # a drag hides from each single test, not from their sum: the whitened innovations of
         # the recent fixes must average to zero (a sequential test over 4 … 32 fixes)
-        wv = np.linalg.solve(np.linalg.cholesky(S), m_pos.r)
+        wv = _whiten2(S, m_pos.r)
         self.innov.append(wv)
         self.innov = self.innov[-self.cfg.integrity.innovation_windows[-1]:]
         # (not while the filter is still settling: its innovations have a trend then)
@@ -300,10 +301,12 @@ class FaultBank:
         above the gate of the references' false-alarm rate for the last ``n`` fixes."""
         wins = self.cfg.integrity.innovation_windows
         gate = self.reference_gate(len(wins) / 2.0)
+        recent = np.array(self.innov[-wins[-1]:])
         for n in wins:
-            if len(self.innov) < n:
+            if len(recent) < n:
                 break
-            q = float(np.sum(np.sum(self.innov[-n:], axis=0) ** 2)) / n
+            m = recent[-n:].sum(axis=0)
+            q = float(m @ m) / n
             if q > gate * self.cfg.integrity.reference_safety:
                 return (f"the last {n} fixes pull the same way (their innovations sum to "
                         f"χ² {q:.3g}): a drag"), n
@@ -323,15 +326,12 @@ class FaultBank:
         d0 = enu_offset(b.ins.lat, b.ins.lon, b.ins.h, flt.ins.lat, flt.ins.lon, flt.ins.h)[:2]
         r_b = m_pos.r + d0
         Pb = b.P[:2, :2]
-        S_b = Pb + m_pos.R[:2, :2]
-        q_fix = float(r_b @ np.linalg.solve(S_b, r_b))
-        # the separation after M took the fix (dx is removed from M: x⁺ = x − dx)
+        q_fix = _quad2(Pb + m_pos.R[:2, :2], r_b)
+        # the separation after M took the fix (dx is removed from M: x⁺ = x − dx); the
+        # separation's covariance floored per principal axis
         d = d0 - dx[:2]
-        C = Pb - P_plus_hh
-        w, V = np.linalg.eigh(0.5 * (C + C.T))
-        w = np.maximum(w, self.cfg.integrity.separation_floor_m ** 2)
-        q_sep = float(np.sum((V.T @ d) ** 2 / w))
-        return q_fix, q_sep, float(np.hypot(*d))
+        q_sep = _quad2_floored(Pb - P_plus_hh, d, self.cfg.integrity.separation_floor_m ** 2)
+        return q_fix, q_sep, math.hypot(float(d[0]), float(d[1]))
 
     def _judge_episode(self, flt, m_pos, t, nis) -> Verdict:
         ep, ig = self.episode, self.cfg.integrity
@@ -728,6 +728,44 @@ class FaultBank:
             pl = max(pl, float(np.sqrt(self.gate * lam))
                      + self.k_pl * float(np.sqrt(_largest_eig2(Pb))))
         return pl
+
+
+def _whiten2(S, r) -> np.ndarray:
+    """``L⁻¹ r`` with ``S = L Lᵀ`` (Cholesky) of a 2×2 covariance: the whitened innovation."""
+    a, b, d = float(S[0, 0]), float(S[1, 0]), float(S[1, 1])
+    l00 = math.sqrt(a)
+    l10 = b / l00
+    l11 = math.sqrt(d - l10 * l10)
+    w0 = float(r[0]) / l00
+    return np.array([w0, (float(r[1]) - l10 * w0) / l11])
+
+
+def _quad2(S, r) -> float:
+    """``rᵀ S⁻¹ r`` of a 2×2 covariance ``S`` (closed form: it runs per reference and fix)."""
+    a, b, c, d = float(S[0, 0]), float(S[0, 1]), float(S[1, 0]), float(S[1, 1])
+    x, y = float(r[0]), float(r[1])
+    return (d * x * x - (b + c) * x * y + a * y * y) / (a * d - b * c)
+
+
+def _quad2_floored(C, r, floor) -> float:
+    """``rᵀ C⁻¹ r`` of the symmetric part of a 2×2 ``C`` with its eigenvalues floored at
+    ``floor`` (closed-form eigen-decomposition)."""
+    a, d = float(C[0, 0]), float(C[1, 1])
+    b = 0.5 * (float(C[0, 1]) + float(C[1, 0]))
+    x, y = float(r[0]), float(r[1])
+    m, h = 0.5 * (a + d), math.hypot(0.5 * (a - d), b)
+    l1, l2 = m + h, m - h                       # l1 ≥ l2
+    if h == 0.0:
+        return (x * x + y * y) / max(l1, floor)
+    # the eigenvector of l1: (b, l1 − a), or (l1 − d, b) — whichever is the better conditioned
+    if abs(l1 - a) >= abs(l1 - d):
+        u, v = b, l1 - a
+    else:
+        u, v = l1 - d, b
+    n = math.hypot(u, v)
+    u, v = u / n, v / n
+    p1, p2 = u * x + v * y, -v * x + u * y
+    return p1 * p1 / max(l1, floor) + p2 * p2 / max(l2, floor)
 
 
 def _largest_eig2(A) -> float:

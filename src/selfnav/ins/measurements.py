@@ -217,7 +217,9 @@ class NonHolonomic(Measurement):
         mu_col = -1 if flt.layout.mu is None else flt.layout.mu.start
         r, H = _nhc_rows(flt.ins.state_array(), flt.omega_b, flt.nhc_lever_b, flt.mu, mu_col,
                          flt.nx)
-        return Model(self.kind, r, H, np.diag([self.sigma**2, self.sigma_up**2]))
+        R = np.zeros((2, 2))
+        R[0, 0], R[1, 1] = self.sigma**2, self.sigma_up**2
+        return Model(self.kind, r, H, R)
 
 
 @dataclass

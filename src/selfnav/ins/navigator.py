@@ -57,6 +57,8 @@ DEFAULT_OUT_RATE_HZ = 10.0
 
 _KIND_FIX, _KIND_AID, _KIND_HEADING, _KIND_ODO = 0, 1, 2, 3
 _STATUS_CODE = {s: i for i, s in enumerate(NavStatus)}
+_PACK_LEVER = PACK["lever"]          # (a row's first 21 packed values: pos, vel, C, b_g, b_a)
+assert PACK["ba"].stop == 21
 
 
 @dataclass(frozen=True)
@@ -307,7 +309,7 @@ class Navigator:
         f = np.atleast_2d(np.asarray(accel_m_s2, dtype=float))
         if w.shape != (len(t), 3) or f.shape != (len(t), 3):
             raise SelfnavError("IMU samples need three rates and three specific forces each")
-        if not (np.all(np.isfinite(t)) and np.all(np.isfinite(w)) and np.all(np.isfinite(f))):
+        if not (np.isfinite(t).all() and np.isfinite(w).all() and np.isfinite(f).all()):
             raise SelfnavError("IMU samples must be finite numbers (NaN or inf given)")
         prev = self._t_prev_stamp
         first = (t[1] - t[0]) if len(t) > 1 else (self._dt_prev or 0.01)
@@ -396,7 +398,8 @@ class Navigator:
         if self.fixes and fx.t > self.fixes[-1].t:
             self._fix_dt.append(fx.t - self.fixes[-1].t)
             self._fix_dt = self._fix_dt[-20:]
-            self._fix_dt_median = float(np.median(self._fix_dt))
+            srt = sorted(self._fix_dt)
+            self._fix_dt_median = 0.5 * (srt[(len(srt) - 1) // 2] + srt[len(srt) // 2])
         self.fixes.append(fx)
         for key, val in (("t", fx.t), ("status", FixStatus.PENDING), ("reason", ""),
                          ("nis_h", np.nan), ("nis_v", np.nan), ("nis_vel", np.nan),
@@ -744,19 +747,22 @@ class Navigator:
             return
         self._t_toff = t
         i = flt.layout.toff.start
-        s_cur = float(np.sqrt(max(flt.P[i, i], 0.0)))
-        if s_cur < st.time_offset_settled_s or not self._hist:
+        if not self._hist:
             return
-        from selfnav.ins.calibrate import estimate_time_offset, shift_velocity
-        from selfnav.types import GnssData, ImuData
-
         t_min = t - st.time_offset_window_s
         # the window by sample, not by the blocks the samples came in (the same search
-        # whether the IMU is fed a sample or a second at a time); kept as one block
+        # whether the IMU is fed a sample or a second at a time); kept as one block, and
+        # kept to the window also while the offset is settled (hours of IMU otherwise)
         tt = np.concatenate([h[0] for h in self._hist])
         keep = tt >= t_min - flt.time_offset_applied
         self._hist = [(tt[keep], np.concatenate([h[1] for h in self._hist])[keep],
                        np.concatenate([h[2] for h in self._hist])[keep])]
+        s_cur = float(np.sqrt(max(flt.P[i, i], 0.0)))
+        if s_cur < st.time_offset_settled_s:
+            return
+        from selfnav.ins.calibrate import estimate_time_offset, shift_velocity
+        from selfnav.types import GnssData, ImuData
+
         tt = self._hist[0][0] + flt.time_offset_applied
         imu = ImuData(tt, self._hist[0][1], self._hist[0][2])
         # only fixes the navigator fused (a drag's fixes would pull the search with them)
@@ -1086,15 +1092,11 @@ class Navigator:
             if self._hyp is not None:          # the heading hypotheses' mean
                 pos, vel = self._hyp.mean_point()
         st = np.zeros(PACK_SIZE)
-        st[0:3] = pos
-        st[PACK["vel"]] = vel
-        st[PACK["C"]] = np.asarray(C_nb).reshape(9)
-        st[PACK["bg"]] = flt.bg
-        st[PACK["ba"]] = flt.ba
-        st[PACK["lever"]] = flt.lever_b
+        st[:21] = np.concatenate((pos, vel, np.asarray(C_nb).reshape(9), flt.bg, flt.ba))
+        st[_PACK_LEVER] = flt.lever_b
         dt_row = T - tau
         P = flt.P
-        sig = np.sqrt(np.maximum(np.diag(P)[:9], 0.0))
+        sig = np.sqrt(np.maximum(P.diagonal()[:9], 0.0))
         if self._hyp is None:
             C_out = output_covariance(P, flt.layout, C_nb, vel, flt.lever_b)
         else:      # the whole Gaussian sum about its mean
@@ -1131,21 +1133,25 @@ class Navigator:
         flt = self.flt
         lat, lon, h = flt.ins.lat, flt.ins.lon, flt.ins.h
         vel = flt.ins.velocity_n
+        C_nb = flt.ins.C_nb
         if self._hyp is not None:              # the heading hypotheses' mean
             (lat, lon, h), vel = self._hyp.mean_point()
         if flt.layout.lever is not None:
-            lat, lon, h = offset_to_geodetic(lat, lon, h, flt.ins.C_nb.T @ flt.lever_b)
-        roll, pitch, hdg = att.euler_from_dcm_nb(flt.ins.C_nb)
+            lat, lon, h = offset_to_geodetic(float(lat), float(lon), float(h),
+                                             C_nb.T @ flt.lever_b)
+        # the Euler angles of C_n^b (attitude.euler_from_dcm_nb, scalar)
+        roll = math.atan2(-C_nb[0, 2], C_nb[2, 2])
+        pitch = math.asin(min(max(C_nb[1, 2], -1.0), 1.0))
+        hdg = math.atan2(C_nb[1, 0], C_nb[1, 1]) % (2.0 * math.pi)
         if self._hyp is None:
-            C_out = output_covariance(flt.P, flt.layout, flt.ins.C_nb, flt.ins.velocity_n,
-                                      flt.lever_b)
+            C_out = output_covariance(flt.P, flt.layout, C_nb, flt.ins.velocity_n, flt.lever_b)
         else:
             C_out = self._hyp.output_covariance()
-        s = np.sqrt(np.maximum(np.diag(C_out), 0.0))
+        s = np.sqrt(np.maximum(C_out.diagonal(), 0.0))
         t = flt.t_true
         return NavState(t, math.degrees(float(lat)), math.degrees(float(lon)), float(h),
                         vel, math.degrees(roll), math.degrees(pitch),
-                        math.degrees(hdg) % 360.0, float(np.hypot(s[0], s[1])),
+                        math.degrees(hdg) % 360.0, math.hypot(s[0], s[1]),
                         self._status(t), self.bank.protection_level(flt, t, C_out[:2, :2]), s,
                         tuple(self._decisions))
 
