@@ -96,6 +96,27 @@ def test_simulate_in_memory_determinism_and_stream_independence():
     assert not np.array_equal(a.gnss.lat, c.gnss.lat)
 
 
+@pytest.mark.parametrize("grade", ["consumer", "industrial"])
+def test_the_recorded_imu_errors_rebuild_the_measured_rates(grade):
+    # the errors a simulation records (the truth a filter's sensor states are checked against,
+    # benchmarks/roadnav_nees.py): exact rates through T, plus the turn-on bias, the
+    # Gauss–Markov and random-walk processes, leave only the white noise of the grade
+    from selfnav.sensors import imu_grade
+
+    sim = sc.simulate({"scenario": {"kind": "static"}, "imu": {"grade": grade}}, seed=4,
+                      duration=60.0)
+    c = sim.imu_errors["gyro"]
+    rebuilt = sim.imu_exact.omega_ib_b @ c["matrix"].T + c["bias"]
+    for key in ("gauss_markov", "random_walk"):
+        if key in c:
+            rebuilt = rebuilt + c[key]
+    white = imu_grade(grade).gyro.white / np.sqrt(sim.imu.dt)
+    resid = sim.imu.omega_ib_b - rebuilt
+    assert np.all(np.abs(resid.std(axis=0) / white - 1.0) < 0.05)
+    assert np.all(np.abs(resid.mean(axis=0)) < 5 * white / np.sqrt(len(resid)))
+    assert ("random_walk" in c) == (grade == "industrial")
+
+
 def test_car_scenario_follows_the_driven_path():
     """The spline truth stays on the car's analytic path (the road centre line with corner arcs)."""
     sim = sc.simulate({"scenario": {"kind": "car", "truth_hz": 0}}, seed=2, duration=120.0,

@@ -111,7 +111,8 @@ class SensorTriad:
             c["gauss_markov"] = gm
         rw = _vec3(self.random_walk)
         if np.any(rw > 0):
-            y = y + np.cumsum(rng.normal(size=(n, 3)) * rw * np.sqrt(dt), axis=0)
+            c["random_walk"] = np.cumsum(rng.normal(size=(n, 3)) * rw * np.sqrt(dt), axis=0)
+            y = y + c["random_walk"]
         wh = _vec3(self.white)
         if np.any(wh > 0):
             y = y + rng.normal(size=(n, 3)) * wh / np.sqrt(dt)

@@ -113,6 +113,9 @@ class Simulation:
     route : the :class:`~selfnav.sim.car.CarRoute` driven (car) or None
     odometer : :class:`~selfnav.types.OdometerData` (``[odometer] enabled``) or None; its
         ``meta['scale_factor']`` is the drive's true scale-factor error
+    imu_errors : the IMU errors drawn, ``{"gyro": ..., "accel": ...}`` as
+        :meth:`selfnav.sensors.ImuErrorModel.apply` returns them (the truth a filter's sensor
+        states are checked against)
     """
 
     name: str
@@ -124,6 +127,7 @@ class Simulation:
     config: dict = field(default_factory=dict)
     route: object = None
     odometer: object = None
+    imu_errors: dict | None = None
 
 
 def _merge(base: dict, over: dict) -> dict:
@@ -304,7 +308,8 @@ def simulate(spec, *, seed: int = 0, grade: str | None = None, duration: float |
     progress("sensor errors")
     n = len(exact)
     t_err = exact.t if exact.position is None else exact.t[0] + exact.dt * np.arange(n)
-    w, f = model.apply(t_err, exact.omega_ib_b, exact.f_ib_b, np.random.default_rng(s_imu))
+    w, f, imu_errors = model.apply(t_err, exact.omega_ib_b, exact.f_ib_b,
+                                   np.random.default_rng(s_imu), return_errors=True)
     imu = ImuData(exact.t, w, f, None, exact.position,
                   source=f"simulated {cfg['scenario']['name']}, IMU grade {model.name}",
                   meta={"simulated": True, "seed": seed, "grade": cfg["imu"]["grade"]})
@@ -340,7 +345,8 @@ def simulate(spec, *, seed: int = 0, grade: str | None = None, duration: float |
         keep[-1] = True
         truth = Trajectory(truth.t[keep], truth.lat[keep], truth.lon[keep], truth.h[keep],
                            truth.velocity_n[keep], truth.C_nb[keep], truth.source)
-    return Simulation(cfg["scenario"]["name"], truth, imu, exact, gnss, map_path, cfg, route, odo)
+    return Simulation(cfg["scenario"]["name"], truth, imu, exact, gnss, map_path, cfg, route, odo,
+                      imu_errors)
 
 
 def _odometer(o, truth, seed_seq) -> OdometerData:
