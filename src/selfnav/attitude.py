@@ -14,6 +14,8 @@ All functions accept a single item or a stack with leading dimensions.
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 
@@ -80,8 +82,12 @@ def dcm_bn_from_euler(roll, pitch, heading):
 
 
 def euler_from_dcm_nb(C_nb):
-    """Roll, pitch, heading (rad; heading in [0, 2π)) from ``C_n^b``."""
+    """Roll, pitch, heading (rad; heading in [0, 2π)) from ``C_n^b`` (one matrix takes a
+    scalar path: the navigator's every returned state)."""
     C = np.asarray(C_nb, dtype=float)
+    if C.shape == (3, 3):
+        return (math.atan2(-C[0, 2], C[2, 2]), math.asin(min(max(C[1, 2], -1.0), 1.0)),
+                math.atan2(C[1, 0], C[1, 1]) % (2.0 * math.pi))
     pitch = np.arcsin(np.clip(C[..., 1, 2], -1.0, 1.0))
     heading = np.mod(np.arctan2(C[..., 1, 0], C[..., 1, 1]), 2 * np.pi)
     roll = np.arctan2(-C[..., 0, 2], C[..., 2, 2])

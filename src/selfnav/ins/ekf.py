@@ -388,27 +388,30 @@ def nis(P, H, R, r) -> float:
 
 
 @numba.njit(cache=True)
-def _sensor_matrix_inv(scale, offdiag):  # pragma: no cover - compiled
-    """``(I + S + M)⁻¹`` of :func:`sensor_matrix` (a correction's path: one call each)."""
+def _sensor_matrix(scale, offdiag, where):  # pragma: no cover - compiled
+    """``I + S + M`` with the off-diagonal elements at ``where`` (:data:`OFFDIAG`)."""
     T = np.eye(3)
     for i in range(3):
         T[i, i] += scale[i]
-    T[0, 1] += offdiag[0]
-    T[0, 2] += offdiag[1]
-    T[1, 0] += offdiag[2]
-    T[1, 2] += offdiag[3]
-    T[2, 0] += offdiag[4]
-    T[2, 1] += offdiag[5]
-    return inv3(T)
+    for k in range(where.shape[0]):
+        T[where[k, 0], where[k, 1]] += offdiag[k]
+    return T
+
+
+@numba.njit(cache=True)
+def _sensor_matrix_inv(scale, offdiag, where):  # pragma: no cover - compiled
+    """``(I + S + M)⁻¹`` (a correction's path: one call each)."""
+    return inv3(_sensor_matrix(scale, offdiag, where))
+
+
+_OFFDIAG = np.array(OFFDIAG, dtype=np.int64)
 
 
 def sensor_matrix(scale, offdiag) -> np.ndarray:
     """``I + S + M`` of a sensor triad from its scale factors (3,) and the six off-diagonal
     misalignment elements in the order of :data:`OFFDIAG`."""
-    T = np.eye(3) + np.diag(np.asarray(scale, float))
-    for k, (r, c) in enumerate(OFFDIAG):
-        T[r, c] += offdiag[k]
-    return T
+    return _sensor_matrix(np.asarray(scale, float).reshape(3),
+                          np.asarray(offdiag, float).reshape(6), _OFFDIAG)
 
 
 class InsGnssFilter:
@@ -522,8 +525,8 @@ class InsGnssFilter:
         return q
 
     def _sensor_inv(self):
-        self._Tg_inv = _sensor_matrix_inv(self.sg, self.mg)
-        self._Ta_inv = _sensor_matrix_inv(self.sa, self.ma)
+        self._Tg_inv = _sensor_matrix_inv(self.sg, self.mg, _OFFDIAG)
+        self._Ta_inv = _sensor_matrix_inv(self.sa, self.ma, _OFFDIAG)
 
     def _vib_classes(self):
         """Which vibration factor scales each state's noise: 1 the gyro's (attitude and gyro

@@ -1139,10 +1139,7 @@ class Navigator:
         if flt.layout.lever is not None:
             lat, lon, h = offset_to_geodetic(float(lat), float(lon), float(h),
                                              C_nb.T @ flt.lever_b)
-        # the Euler angles of C_n^b (attitude.euler_from_dcm_nb, scalar)
-        roll = math.atan2(-C_nb[0, 2], C_nb[2, 2])
-        pitch = math.asin(min(max(C_nb[1, 2], -1.0), 1.0))
-        hdg = math.atan2(C_nb[1, 0], C_nb[1, 1]) % (2.0 * math.pi)
+        roll, pitch, hdg = att.euler_from_dcm_nb(C_nb)
         if self._hyp is None:
             C_out = output_covariance(flt.P, flt.layout, C_nb, flt.ins.velocity_n, flt.lever_b)
         else:
