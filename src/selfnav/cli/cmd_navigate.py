@@ -87,8 +87,15 @@ def register(app: typer.Typer) -> None:
             "--fix-log", parser=opt.file_path, metavar="FILE",
             help="Write one row per GNSS fix: t, status, reason, NIS (a FILE, written "
                  "atomically).")] = None,
-        nhc: Annotated[bool, typer.Option(
-            "--nhc/--no-nhc", help="Non-holonomic constraint (a car).")] = True,
+        platform: Annotated[str, opt.choice_option(
+            "--platform", choices=opt.PLATFORMS,
+            help="What carries the IMU: its motion constraints and its start (auto: a car's, "
+                 "and a platform slower than a car's start is started anyway, without the "
+                 "NHC; pedestrian, rover, boat, aircraft, drone start at rest or moving at "
+                 "any speed, no NHC).")] = "auto",
+        nhc: Annotated[Optional[bool], typer.Option(
+            "--nhc/--no-nhc", help="Non-holonomic constraint (default: as the platform "
+                                   "says; on for a car).")] = None,
         scale_factors: Annotated[Optional[bool], typer.Option(
             "--scale-factors/--no-scale-factors",
             help="Estimate scale factors and axis misalignment (default: as the grade "
@@ -166,7 +173,7 @@ def register(app: typer.Typer) -> None:
                 sol = api.navigate(data, g, graph, smooth=smooth, grade=grade,
                                    lever_arm_m=lever, nhc_lever_m=nhc_arm,
                                    imu_time_offset_s=imu_time_offset, nhc=nhc,
-                                   mount_states=mount_states, init=init,
+                                   platform=platform, mount_states=mount_states, init=init,
                                    out_rate_hz=out_rate, progress=progress, odometer=odo,
                                    **extra)
         except np.linalg.LinAlgError as e:   # a safety net: one line, not a traceback

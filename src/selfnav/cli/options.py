@@ -26,6 +26,9 @@ DATUMS = ("wgs84", "pz90.11", "pz90", "sk42")
 GRADES = ("navigation", "tactical", "industrial", "consumer")
 SIM_GRADES = (*GRADES, "perfect")
 NAV_GRADES = ("auto", *GRADES)
+#: selfnav.ins.config.PLATFORM_NAMES (a test keeps them equal; the CLI does not import the filter)
+PLATFORMS = ("auto", "car", "pedestrian", "rover", "boat", "aircraft", "drone", "ship", "walker",
+             "multirotor")
 RAW_FORMATS = ("auto", "rinex", "ubx", "android", "smartloc", "psins")
 
 
@@ -244,7 +247,7 @@ HELP_PANELS = {
         "Method": ("method", "smooth", "grade"),
         "Sensor geometry and timing (estimated when not given)": (
             "lever_arm", "imu_time_offset", "nhc_lever", "mount_states", "scale_factors"),
-        "Vehicle constraints": ("nhc",),
+        "Vehicle constraints": ("platform", "nhc"),
         "--method seed only": ("matcher", "ins_datum", "declination_deg"),
     },
     "moving": {

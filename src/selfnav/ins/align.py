@@ -635,6 +635,14 @@ def healthy_start(t, xy, sigma, window=20):
     return None
 
 
+def fix_sigmas(gnss: GnssData, floor: float = 0.0, default: float = 10.0) -> np.ndarray:
+    """The horizontal σ believed for each fix: the file's, ``default`` where it has none,
+    never below ``floor`` (the filter's ``gnss.sigma_floor``)."""
+    sig = (np.asarray(gnss.sigma_m, float) if gnss.sigma_m is not None
+           else np.full(len(gnss.t), np.nan))
+    return np.maximum(np.where(np.isfinite(sig), sig, default), floor)
+
+
 def robust_init(imu, gnss, graph=None, *, sigma=10.0, window=20, cfg: FilterConfig | None = None,
                 require_healthy: bool = False):
     """The in-motion alignment (:func:`init_from_gnss`) started only after the first
@@ -647,11 +655,7 @@ def robust_init(imu, gnss, graph=None, *, sigma=10.0, window=20, cfg: FilterConf
     causal start-up waits for one)."""
     fc = cfg if cfg is not None else FilterConfig.for_grade("consumer")
     fc = fc.updated(window=max(fc.init.window, 15))
-    sig = (np.asarray(gnss.sigma_m, float) if gnss.sigma_m is not None
-           else np.full(len(gnss.t), np.nan))
-    sig = np.where(np.isfinite(sig), sig, sigma)
-    if cfg is not None:
-        sig = np.maximum(sig, cfg.gnss.sigma_floor)
+    sig = fix_sigmas(gnss, cfg.gnss.sigma_floor if cfg is not None else 0.0, sigma)
     xy = enu_offset(gnss.lat[0], gnss.lon[0], 0.0, gnss.lat, gnss.lon, 0.0)[:, :2]
     k = healthy_start(gnss.t, xy, sig, window)
     if k is None:

@@ -202,6 +202,20 @@ class Initialisation:
         share of the weight
     heading_resolve_max_s : … or after this many seconds (the covariance then covers the
         others)
+    any_start : how a start that needs no speed and no straight line
+        (:mod:`selfnav.ins.anystart`) is used — ``"now"``: at once (a walker, a robot, a boat,
+        a drone start at rest or slow); ``"fallback"``: only when the car's start has found no
+        straight run after ``any_start_motion_s`` of motion (a car in slow traffic); a policy
+    any_start_motion_s : s of motion the fixes show before the fallback start (a car leaving
+        a parking place creeps for up to half a minute before its straight run: drive_0708
+        creeps 18 s at ~1 m/s)
+    any_start_speed : the fallback start only while the fixes' speed is below this, m/s (a
+        walker, a robot, a boat, a hovering drone; a car slower than its own start needs may
+        still be a car accelerating: it waits)
+    any_window_s : s of fixes the start's position and velocity are fitted over
+    course_window_s : … or up to this many s of fixes on a straight line, for the course
+    course_heading : the platform moves along its body's forward axis (a fact of the
+        platform: a multirotor does not), so the course gives its heading
     course_heading_sigma : σ of a vehicle's heading about the course it is taken from (a
         fact of the vehicle: its slip angle and the IMU's yaw on it), rad — beyond this the
         heading's error is the course's, one error with the velocity's cross-track part
@@ -219,6 +233,12 @@ class Initialisation:
     given_pos_sigma: float = 1.0
     given_vel_sigma: float = 0.1
     given_att_sigma: tuple = (1.0 * DEG, 1.0 * DEG, 3.0 * DEG)
+    any_start: str = "fallback"
+    any_start_motion_s: float = 30.0
+    any_start_speed: float = 2.5
+    any_window_s: float = 4.0
+    course_window_s: float = 20.0
+    course_heading: bool = True
     course_heading_sigma: float = 4.0 * DEG
     heading_split_sigma: float | None = 3.0 * DEG
     heading_split_max: int = 31
@@ -259,6 +279,8 @@ class VehicleConstraints:
 
     Attributes
     ----------
+    platform : the platform profile these constraints came from (:data:`PLATFORMS`; ``auto``:
+        a car's, with the non-holonomic constraint dropped when the start shows no car)
     nhc : a car does not slide sideways or jump
     nhc_sigma : m/s, lateral (and vertical) velocity at the NHC point
     nhc_sigma_up : m/s, vertical if it differs from lateral
@@ -284,6 +306,7 @@ class VehicleConstraints:
     mag_heading_sigma : σ of a magnetometer heading (a car's body field, soft iron), rad
     """
 
+    platform: str = "auto"
     nhc: bool = True
     nhc_sigma: float = 0.3
     nhc_sigma_up: float | None = None
@@ -517,18 +540,72 @@ class FilterConfig:
         return base.updated(**{**GRADE_FILTER_SETTINGS[key], **fields})
 
 
+#: Platform profiles (issue 20): the motion constraints and the start each platform allows,
+#: as facts of the platform (does it slide sideways, stop, move along its nose; how far its
+#: heading is from its course). A platform that moves along its nose keeps the sideways
+#: constraint with a mounting-yaw state for its offset (a handheld unit, a boat's leeway):
+#: on simulated walkers, rovers and boats it holds the heading 2-3 times closer than without
+#: (benchmarks/platforms_start.py). ``auto`` is the car's, and the navigator drops the NHC when
+#: the start shows no car (:mod:`selfnav.ins.anystart`): it cannot tell a walker from a drone.
+PLATFORMS = {
+    "car": dict(nhc=True, zupt=True, any_start="fallback", course_heading=True,
+                course_heading_sigma=4.0 * DEG),
+    # a walker holding the unit ahead: it moves along its nose, 0-10 deg off (a mount state)
+    "pedestrian": dict(nhc=True, mount_states=True, mount_sigma=10.0 * DEG, zupt=True,
+                       zupt_speed=0.1, any_start="now", course_heading=True,
+                       course_heading_sigma=15.0 * DEG),
+    # skid-steer: slips in its turns, nearly on the spot
+    "rover": dict(nhc=True, mount_states=True, mount_sigma=5.0 * DEG, zupt=True,
+                  zupt_speed=0.1, any_start="now", course_heading=True,
+                  course_heading_sigma=10.0 * DEG),
+    # leeway, current; never still
+    "boat": dict(nhc=True, mount_states=True, mount_sigma=10.0 * DEG, zupt=False,
+                 any_start="now", course_heading=True, course_heading_sigma=15.0 * DEG),
+    # crab angle in wind, sideslip in turns: no sideways constraint
+    "aircraft": dict(nhc=False, zupt=False, any_start="now", course_heading=True,
+                     course_heading_sigma=20.0 * DEG),
+    # a multirotor flies sideways
+    "drone": dict(nhc=False, zupt=True, zupt_speed=0.1, any_start="now", course_heading=False),
+}
+#: What ``auto`` becomes when the car's start finds no car (a platform moving slower than a
+#: car's start needs, :meth:`selfnav.ins.startup.StartUp.try_start`): no sideways constraint,
+#: zero-velocity updates only when the INS is nearly still, the course a loose heading.
+SLOW_PLATFORM = dict(nhc=True, mount_states=True, mount_sigma=15.0 * DEG, zupt_speed=0.1,
+                     course_heading=True, course_heading_sigma=20.0 * DEG)
+PLATFORM_ALIASES = {"ship": "boat", "walker": "pedestrian", "multirotor": "drone"}
+PLATFORM_NAMES = ("auto",) + tuple(PLATFORMS) + tuple(PLATFORM_ALIASES)
+
+
+def platform_settings(platform: str) -> dict:
+    """The configuration fields of a platform profile (:data:`PLATFORMS`)."""
+    key = str(platform).lower().strip()
+    key = PLATFORM_ALIASES.get(key, key)
+    if key == "auto":
+        return {**PLATFORMS["car"], "platform": "auto"}
+    if key not in PLATFORMS:
+        raise SelfnavError(f"unknown platform '{platform}' (use {', '.join(PLATFORM_NAMES)})")
+    return {**PLATFORMS[key], "platform": key}
+
+
 def navigator_config(grade: str = "auto", *, lever_arm_m=None, nhc_lever_m=None,
-                     nhc: bool = True, imu_time_offset_s: float | None = None,
-                     odometer: bool = False, **fields) -> FilterConfig:
+                     nhc: bool | None = None, imu_time_offset_s: float | None = None,
+                     odometer: bool = False, platform: str = "auto",
+                     **fields) -> FilterConfig:
     """The configuration :class:`selfnav.ins.Navigator` (and ``selfnav navigate``) starts from.
 
     ``grade="auto"`` is the consumer preset as the prior (the widest), to be raised to what
     the data shows; ``lever_arm_m`` (IMU → antenna, body RFU, m) not given: estimated (3
     states); ``imu_time_offset_s`` not given: estimated (a state with the prior σ
     ``time_offset_sigma``); ``nhc_lever_m``: IMU → the point where the non-holonomic
-    constraint holds (rear axle); ``fields`` override any field by name.
+    constraint holds (rear axle); ``platform``: a profile of :data:`PLATFORMS` (its motion
+    constraints and start), ``nhc`` given: overrides the profile's; ``fields`` override any
+    field by name.
     """
-    opts = dict(nhc=nhc, odometer=odometer)
+    opts = dict(platform_settings(platform), odometer=odometer)
+    if nhc is not None:
+        opts["nhc"] = bool(nhc)
+        if opts["platform"] == "auto":
+            opts["platform"] = f"auto, NHC {'on' if nhc else 'off'}"   # the user's choice stands
     if lever_arm_m is not None:
         opts["lever_arm_b"] = np.asarray(lever_arm_m, dtype=float)
     else:
@@ -537,7 +614,7 @@ def navigator_config(grade: str = "auto", *, lever_arm_m=None, nhc_lever_m=None,
         opts["nhc_lever_b"] = np.asarray(nhc_lever_m, dtype=float)
     opts["time_offset"] = imu_time_offset_s is None
     auto = str(grade).lower().strip() == "auto"
-    cfg = FilterConfig.for_grade("consumer" if auto else grade, **opts, **fields)
+    cfg = FilterConfig.for_grade("consumer" if auto else grade, **{**opts, **fields})
     if auto:
         cfg.imu.grade = "auto (consumer prior)"
     return cfg

@@ -85,11 +85,15 @@ class HeadingHypotheses:
         sig = math.sqrt(s2)
         span = min(3.0 * sig, math.pi)
         spacing = 2.0 * split_sigma
-        n = int(math.ceil(span / spacing))
-        n = min(n, (max_hypotheses - 1) // 2)
+        n_full = int(math.ceil(span / spacing))
+        n = min(n_full, (max_hypotheses - 1) // 2)
+        if n < n_full:
+            # fewer hypotheses than the span needs at this width: spread them over the span,
+            # each as wide as half the spacing (the gaps stay covered)
+            spacing = span / (n + 0.5)
         if 2 * n * spacing > 2.0 * math.pi:
             spacing = 2.0 * math.pi / (2 * n + 1)
-        sub = min(split_sigma, 0.5 * spacing) if n else sig
+        sub = (min(split_sigma, 0.5 * spacing) if n_full <= n else 0.5 * spacing) if n else sig
         deltas = np.arange(-n, n + 1) * spacing
         col = P[:, _IPSI].copy()
         shrink = (1.0 - sub * sub / s2) / s2

@@ -206,7 +206,7 @@ class Navigator:
     config : FilterConfig, optional
         The full configuration; default :func:`selfnav.ins.config.navigator_config` with the
         keywords below (the defaults of ``selfnav navigate``).
-    grade, lever_arm_m, nhc_lever_m, nhc, imu_time_offset_s, odometer :
+    grade, lever_arm_m, nhc_lever_m, nhc, imu_time_offset_s, odometer, platform :
         As :func:`selfnav.ins.config.navigator_config`.
     road_aid : optional
         A map aid (:class:`selfnav.roads.aid.EkfRoadAid`): ``start_check(imu, gnss, cfg)``,
@@ -226,11 +226,11 @@ class Navigator:
     """
 
     def __init__(self, config: FilterConfig | None = None, *, grade: str = "auto",
-                 lever_arm_m=None, nhc_lever_m=None, nhc: bool = True,
+                 lever_arm_m=None, nhc_lever_m=None, nhc: bool | None = None,
                  imu_time_offset_s: float | None = None, odometer: bool = False,
                  road_aid=None, init: dict | None = None,
                  out_rate_hz: float = DEFAULT_OUT_RATE_HZ, smoother: bool = False,
-                 map=None):
+                 map=None, platform: str = "auto"):
         from selfnav.ins.config import navigator_config
 
         if map is not None:                 # a road graph or its file: the road aid of --map
@@ -244,7 +244,7 @@ class Navigator:
         if config is None:
             config = navigator_config(grade, lever_arm_m=lever_arm_m, nhc_lever_m=nhc_lever_m,
                                       nhc=nhc, imu_time_offset_s=imu_time_offset_s,
-                                      odometer=odometer)
+                                      odometer=odometer, platform=platform)
         if not out_rate_hz >= 0:
             raise SelfnavError(f"the output rate must be >= 0 Hz, got {out_rate_hz}")
         self.cfg = config
@@ -432,15 +432,20 @@ class Navigator:
         self._push_odometer(float(t), float(speed_mps), sigma)
 
     def add_magnetometer(self, t, mag_b):
-        """A magnetometer sample (body RFU, any unit) at true time ``t``: a heading
-        measurement (tilt-compensated, IGRF declination) at most ``vehicle.mag_step`` apart."""
+        """A magnetometer sample (body RFU, any unit) at true time ``t``: before the start, the
+        start's heading where the course gives none (:mod:`selfnav.ins.anystart`); after it,
+        with ``vehicle.use_magnetometer``, a heading measurement (tilt-compensated, IGRF
+        declination) at most ``vehicle.mag_step`` apart."""
         veh = self.cfg.vehicle
-        if not veh.use_magnetometer or float(t) - self._heading_t < veh.mag_step - 1e-9:
+        if float(t) - self._heading_t < veh.mag_step - 1e-9:
             return
-        self._heading_t = float(t)
-        if self.flt is None:
+        if self.flt is None:       # the start's heading (selfnav.ins.anystart), updates or not
+            self._heading_t = float(t)
             self.startup.magnetometer.append((float(t), np.asarray(mag_b, float)))
             return
+        if not veh.use_magnetometer:
+            return
+        self._heading_t = float(t)
         self._push(float(t), _KIND_HEADING, np.asarray(mag_b, dtype=float))
 
     def _push_odometer(self, t, speed, sigma):
@@ -510,9 +515,24 @@ class Navigator:
         cfg = cfg.updated(velocity_lag=bool(has_vel and cfg.gnss.use_velocity
                                             and cfg.states.velocity_lag),
                           odometer=bool(cfg.states.odometer or st.odometer))
+        notes = list(start.notes)
+        if init.get("fallback") and cfg.vehicle.platform == "auto":
+            # the car's start found no car (issue 20): a slow platform's constraints
+            notes.append(f"slow platform: {init['fallback']} (--platform says which)")
+            import warnings
+
+            from selfnav.errors import SelfnavWarning
+
+            warnings.warn(f"started as a platform slower than a car ({init['fallback']}): "
+                          f"the sideways constraint keeps a mounting-yaw state, zero-velocity "
+                          f"updates only below 0.1 m/s (--platform car|pedestrian|rover|boat|"
+                          f"drone|aircraft says which)", SelfnavWarning, stacklevel=3)
         self.cfg = cfg
         self.start_info = {"t": float(init["t"]), "measured": start.measured,
-                           "notes": list(start.notes), "attempts": st.attempts}
+                           "notes": notes, "attempts": st.attempts,
+                           "kind": init.get("start_kind", "course"),
+                           "heading_source": init.get("heading_source", "course"),
+                           "platform": cfg.vehicle.platform, "nhc": bool(cfg.vehicle.nhc)}
         prior = str(self.startup.cfg.imu.grade)
         if start.notes and not prior.startswith("auto"):
             import warnings
@@ -563,7 +583,7 @@ class Navigator:
             if t_o > t0:
                 self._push_odometer(t_o, v_o, s_o)
         for (t_m, m_b) in st.magnetometer:
-            if t_m > t0:
+            if t_m > t0 and cfg.vehicle.use_magnetometer:
                 self._push(t_m, _KIND_HEADING, m_b)
         k = imu.t > t0_stamp + 1e-12
         self._catching_up = True
@@ -1253,6 +1273,11 @@ class Navigator:
                "fixes_excluded_later": int(np.sum(self.log["excluded"])),
                "start_s": self.start_info.get("t"),
                "start_attempts": self.start_info.get("attempts"),
+               "start_kind": self.start_info.get("kind"),
+               "start_heading": self.start_info.get("heading_source"),
+               "heading_hypotheses": self.start_info.get("heading_hypotheses", 0),
+               "platform": self.start_info.get("platform", self.cfg.vehicle.platform),
+               "nhc": self.start_info.get("nhc", bool(self.cfg.vehicle.nhc)),
                "episodes": len(self._episodes_done) + (len(self.bank.episodes) if self.bank else 0),
                "resets_to_dead_reckoning": self.bank.alarms if self.bank else 0,
                "recoveries": self.bank.recoveries if self.bank else 0,

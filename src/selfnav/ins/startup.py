@@ -26,8 +26,9 @@ import numpy as np
 
 from selfnav.errors import SelfnavError
 from selfnav.ins import calibrate
-from selfnav.ins.align import robust_init
-from selfnav.ins.config import FilterConfig
+from selfnav.ins.align import fix_sigmas, robust_init
+from selfnav.ins.anystart import any_start, displaced, moving_seconds, recent_speed
+from selfnav.ins.config import SLOW_PLATFORM, FilterConfig
 from selfnav.types import GnssData, ImuData
 
 
@@ -149,8 +150,14 @@ class StartUp:
         try:
             if self.start_check is not None:
                 init = self.start_check(imu_true, gnss, cfg)
+            elif cfg.init.any_start == "now":
+                init = any_start(imu_true, gnss, cfg, self.magnetometer)
             else:
-                init = robust_init(imu_true, gnss, cfg=cfg, require_healthy=True)
+                try:
+                    init = robust_init(imu_true, gnss, cfg=cfg, require_healthy=True)
+                except SelfnavError as e:
+                    # a platform that moves but never gives the car's straight fast run
+                    init, cfg = self._fallback(imu_true, gnss, cfg, e)
         except SelfnavError as e:
             self.last_error = str(e)
             return None
@@ -159,5 +166,28 @@ class StartUp:
             return None
         return Start(dict(init), cfg, measured, notes)
 
+    def _fallback(self, imu, gnss, cfg, error):
+        """The start of any platform (``any_start="fallback"``) once the fixes have shown
+        ``any_start_motion_s`` of motion and moved beyond their noise within 30 s, slower
+        than ``any_start_speed`` (a walker, a robot, a boat, a car in a jam); else
+        ``error`` again. A platform moving fast waits for the car's straight run; one at rest
+        (a car about to drive, a walker holding the unit) waits for motion."""
+        if cfg.init.any_start != "fallback":
+            raise error
+        sig = fix_sigmas(gnss, cfg.gnss.sigma_floor)
+        moved = moving_seconds(gnss, sig)
+        if moved < cfg.init.any_start_motion_s:
+            raise error
+        speed = recent_speed(gnss, sig)
+        if speed >= cfg.init.any_start_speed or not displaced(gnss, sig):
+            raise error
+        if cfg.vehicle.platform == "auto":
+            cfg = cfg.updated(**SLOW_PLATFORM)
+        elif cfg.vehicle.platform.startswith("auto"):          # the user set the NHC
+            cfg = cfg.updated(**{**SLOW_PLATFORM, "nhc": cfg.vehicle.nhc})
+        init = any_start(imu, gnss, cfg, self.magnetometer)
+        init["fallback"] = (f"{moved:.0f} s of motion at {speed:.1f} m/s without a straight "
+                            f"run faster than {cfg.init.min_speed:g} m/s")
+        return init, cfg
 
 __all__ = ["Start", "StartUp"]

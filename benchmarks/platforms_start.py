@@ -1,0 +1,103 @@
+"""The navigator on every simulated platform (issue 20): does it start, how soon after the
+first fix, and how well does it follow — SIMULATED data (selfnav.simulate).
+
+    python benchmarks/platforms_start.py [--seeds 30 31 32] [--duration 300] [--mode profile|auto]
+
+Per platform and start (at rest / moving): seconds from the first fix to the start, the start
+kind and heading source, horizontal RMS (and the fixes' σ) and heading RMS over the whole
+solution and from 60 s after the start (the heading hypotheses resolved), the largest error
+at the end of the issue's outages (10 s every 30 s for the walker and the rover, 30 s every
+120 s for the boat and the drone, from 60 s after the start; a second run), the CPU time of
+the clean run. ``--mode profile`` passes ``platform=<the platform>``; ``auto`` the defaults.
+"""
+from __future__ import annotations
+
+import argparse
+import time
+import warnings
+
+import numpy as np
+
+import selfnav
+
+PLATFORMS = ("pedestrian", "rover", "boat", "drone")
+
+
+#: outages of the issue's acceptance: (length, period) s — 10 s every 30 s for the slow ground
+#: platforms, 30 s every 120 s for the boat and the drone
+OUTAGES = {"pedestrian": (10.0, 30.0), "rover": (10.0, 30.0), "boat": (30.0, 120.0),
+           "drone": (30.0, 120.0)}
+
+
+def outage_ends(kind, start, seed, duration, kw, t_from):
+    """Largest horizontal error at the end of each outage (the last row before the fixes
+    come back), the outages from ``t_from`` on."""
+    from selfnav.earth import enu_offset
+
+    sim = selfnav.simulate(kind, seed=seed, duration=duration, start=start)
+    gnss = sim.gnss.as_gnss()
+    length, period = OUTAGES[kind]
+    phase = (gnss.t - t_from) % period
+    cut = (gnss.t >= t_from) & (phase >= period - length)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        sol = selfnav.navigate(sim.imu, gnss.select(~cut), **kw)
+    tr = sol.trajectory
+    ends = []
+    for t_end in np.arange(t_from + period, gnss.t[-1], period):
+        k = np.searchsorted(tr.t, t_end) - 1
+        if k < 0 or tr.t[k] < t_end - length:
+            continue
+        j = np.searchsorted(sim.truth.t, tr.t[k])
+        d = enu_offset(sim.truth.lat[j], sim.truth.lon[j], 0.0, tr.lat[k], tr.lon[k], 0.0)
+        ends.append(float(np.hypot(d[0], d[1])))
+    return max(ends) if ends else float("nan")
+
+
+def one(kind, start, seed, duration, mode):
+    sim = selfnav.simulate(kind, seed=seed, duration=duration, start=start)
+    gnss = sim.gnss.as_gnss()
+    kw = {} if mode == "auto" else {"platform": kind}
+    t0 = time.process_time()
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        try:
+            sol = selfnav.navigate(sim.imu, gnss, **kw)
+        except selfnav.errors.SelfnavError as e:
+            return dict(kind=kind, start=start, seed=seed, error=str(e)[:60])
+        ev = selfnav.evaluate(sim.truth, sol)
+        tr = sol.trajectory
+        late = selfnav.evaluate(sim.truth, tr.select(tr.t >= sol.stats["start_s"] + 60.0))
+    st = sol.stats
+    out_max = outage_ends(kind, start, seed, duration, kw, st["start_s"] + 60.0)
+    return dict(kind=kind, start=start, seed=seed, delay=st["start_s"] - gnss.t[0], out=out_max,
+                start_kind=st.get("start_kind"), heading=st.get("start_heading"),
+                rms=ev["horizontal_rms_m"], sigma=float(np.median(gnss.sigma_m)),
+                hdg=ev["heading_rms_deg"], hdg60=late["heading_rms_deg"],
+                rms60=late["horizontal_rms_m"], cpu=time.process_time() - t0)
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--seeds", type=int, nargs="+", default=[30, 31, 32])
+    ap.add_argument("--duration", type=float, default=300.0)
+    ap.add_argument("--mode", choices=("profile", "auto"), default="profile")
+    a = ap.parse_args()
+    print("| platform | start | seed | start after 1st fix s | kind / heading | horizontal RMS m "
+          "(fix σ) | from 60 s after the start | heading RMS ° | from 60 s after | outage ends "
+          "max m | CPU s |")
+    print("| --- | --- | ---: | ---: | --- | ---: | ---: | ---: | ---: | ---: | ---: |")
+    for kind in PLATFORMS:
+        for start in ("rest", "moving"):
+            for seed in a.seeds:
+                r = one(kind, start, seed, a.duration, a.mode)
+                if "error" in r:
+                    print(f"| {kind} | {start} | {seed} | no start: {r['error']} | | | | | | | |")
+                    continue
+                print(f"| {kind} | {start} | {seed} | {r['delay']:.1f} | {r['start_kind']} / "
+                      f"{r['heading']} | {r['rms']:.2f} ({r['sigma']:.2f}) | {r['rms60']:.2f} | "
+                      f"{r['hdg']:.1f} | {r['hdg60']:.1f} | {r['out']:.1f} | {r['cpu']:.1f} |", flush=True)
+
+
+if __name__ == "__main__":
+    main()

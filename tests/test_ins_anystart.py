@@ -1,0 +1,165 @@
+"""The navigator's start on any platform (issue 20, item 1; selfnav.ins.anystart): at rest or
+moving at any speed, the heading from the course or unknown (then a whole circle of heading
+hypotheses), and the car's start left as it was. Simulated data throughout."""
+import math
+
+import numpy as np
+import pytest
+
+import selfnav
+from support import run_cli
+from selfnav import attitude as att
+from selfnav.cli import options as opt
+from selfnav.earth import enu_offset
+from selfnav.ins import config as ic
+from selfnav.ins.anystart import UNKNOWN_HEADING_SIGMA, any_start, displaced, init_anywhere
+from selfnav.ins import feed
+from selfnav.ins.headings import HeadingHypotheses
+from selfnav.ins.navigator import initial_filter
+
+
+def _sim(kind, start, seed=21, duration=60.0):
+    s = selfnav.simulate(kind, seed=seed, duration=duration, start=start)
+    return s, s.imu, s.gnss.as_gnss()
+
+
+def _truth_at(sim, t):
+    tr = sim.truth
+    k = int(np.argmin(np.abs(tr.t - t)))
+    return tr, k
+
+
+def _upto(imu, gnss, t):
+    return imu.select(imu.t <= t), gnss.select(gnss.t <= t)
+
+
+@pytest.mark.parametrize("kind,t_now", [("pedestrian", 25.0), ("rover", 12.0), ("drone", 12.0)])
+def test_a_start_at_rest_is_levelled_still_and_without_a_heading(kind, t_now):
+    """(Standing 30 / 30 / 20 s; 1 Hz fixes need 22 s for the healthy run.)"""
+    sim, imu, gnss = _sim(kind, "rest")
+    cfg = ic.navigator_config(platform=kind)
+    init = any_start(*_upto(imu, gnss, t_now), cfg)
+    assert init["start_kind"] == "rest" and init["heading_source"] == "unknown"
+    assert init["t_used"] <= t_now
+    tr, k = _truth_at(sim, init["t"])
+    assert np.all(np.abs(init["velocity_n"] - tr.velocity_n[k]) < 3 * np.array(init["sigmas"][1]))
+    tr, k = _truth_at(sim, init["t"])
+    r, p, _ = att.euler_from_dcm_nb(init["C_nb"])
+    rt, pt, _ = att.euler_from_dcm_nb(tr.C_nb[k])
+    s_tilt = init["sigmas"][2][0]
+    # the tilt within 3 sigma of the truth, the sigma honest but not vague (< 2 deg)
+    assert abs(r - rt) < 3 * s_tilt and abs(p - pt) < 3 * s_tilt
+    assert s_tilt < math.radians(2.0)
+    assert np.all(init["velocity_n"] == 0.0)
+    d = enu_offset(tr.lat[k], tr.lon[k], 0.0, init["lat"], init["lon"], 0.0)
+    assert math.hypot(d[0], d[1]) < 3 * init["sigmas"][0][0]
+    assert init["sigmas"][2][2] == UNKNOWN_HEADING_SIGMA
+    # the gyro bias from the rest: within 3 sigma of the drawn one (vertical axis)
+    bg = sim.imu_errors["gyro"]["bias"]
+    assert abs(init["gyro_bias"][2] - bg[2]) < 3 * init["gyro_bias_sigma"][2]
+
+
+def test_a_start_while_creeping_is_honest_about_its_velocity_and_tilt():
+    """At 0.3 m/s on a quiet IMU the start may not tell motion from rest: its velocity σ
+    must cover either."""
+    sim, imu, gnss = _sim("rover", "moving")          # 0.3 m/s, 20 Hz fixes: the course is known
+    cfg = ic.navigator_config(platform="rover")
+    i, g = _upto(imu, gnss, 6.0)
+    init = any_start(i, g, cfg)
+    tr, k = _truth_at(sim, init["t"])
+    v_err = np.hypot(*(init["velocity_n"][:2] - tr.velocity_n[k, :2]))
+    assert v_err < 3 * init["sigmas"][1][0]
+    r, p, h = att.euler_from_dcm_nb(init["C_nb"])
+    rt, pt, ht = att.euler_from_dcm_nb(tr.C_nb[k])
+    s_tilt = init["sigmas"][2][0]
+    assert abs(r - rt) < 3 * s_tilt and abs(p - pt) < 3 * s_tilt
+    if init["heading_source"] == "course":
+        dh = math.remainder(h - ht, 2 * math.pi)
+        assert abs(dh) < 3 * (cfg.init.course_heading_sigma + 0.1)
+
+
+def test_a_drone_never_takes_its_heading_from_the_course():
+    sim, imu, gnss = _sim("drone", "moving")
+    init = any_start(*_upto(imu, gnss, 8.0), ic.navigator_config(platform="drone"))
+    assert init["heading_source"] == "unknown"
+
+
+def test_an_unknown_heading_is_split_over_the_whole_circle():
+    sim, imu, gnss = _sim("pedestrian", "rest")
+    cfg = ic.navigator_config(platform="pedestrian")
+    init = init_anywhere(*_upto(imu, gnss, 25.0), cfg,
+                         np.full(int(np.sum(gnss.t <= 25.0)), 1.8))
+    flt = initial_filter(cfg, init)
+    ini = cfg.init
+    hyp = HeadingHypotheses(flt, split_sigma=ini.heading_split_sigma,
+                            max_hypotheses=ini.heading_split_max, prune_ratio=1e4,
+                            resolved_weight=0.99, max_s=120.0, gate=10.0)
+    d = np.sort(hyp.deltas)
+    assert len(d) == ini.heading_split_max
+    gaps = np.diff(np.concatenate([d, [d[0] + 2 * math.pi]]))
+    # every heading within half a spacing of a hypothesis, and each hypothesis that wide
+    assert np.max(gaps) < math.radians(12.0)
+    assert hyp.split_sigma >= 0.5 * np.max(gaps) - 1e-9
+    w = hyp.weights
+    assert np.max(w) / np.min(w) < 1.05                     # a uniform prior
+
+
+def test_auto_waits_at_rest_for_motion():
+    """auto keeps the car's start, and a platform at rest (a car about to drive, a walker
+    holding the unit with a trembling hand) is not started by the fallback until it moves."""
+    cfg = ic.navigator_config()
+    assert cfg.init.any_start == "fallback" and cfg.vehicle.nhc
+    sim, imu, gnss = _sim("pedestrian", "rest", duration=40.0)
+    i, g = _upto(imu, gnss, 28.0)                        # standing 30 s
+    assert not displaced(g, np.full(len(g.t), 1.8))
+    nav = selfnav.Navigator()
+    feed(nav, i, g)
+    assert nav.flt is None and "faster than" in nav.startup.last_error
+
+
+def test_platform_names_of_the_cli_are_the_configs():
+    assert tuple(opt.PLATFORMS) == tuple(ic.PLATFORM_NAMES)
+    with pytest.raises(selfnav.errors.SelfnavError, match="unknown platform"):
+        ic.navigator_config(platform="submarine")
+    assert ic.navigator_config(platform="ship").vehicle.platform == "boat"
+    assert not ic.navigator_config(platform="drone").vehicle.nhc       # flies sideways
+    walker = ic.navigator_config(platform="pedestrian")
+    assert walker.vehicle.nhc and walker.states.mount_states            # along its nose, offset
+    assert not ic.navigator_config(platform="pedestrian", nhc=False).vehicle.nhc
+
+
+@pytest.mark.parametrize("kind,start,platform", [
+    ("pedestrian", "rest", "pedestrian"),
+    ("pedestrian", "moving", None),
+    ("rover", "moving", None)])
+def test_slow_platforms_start_through_the_cli(kind, start, platform, tmp_path, capsys):
+    """Before issue 20 all exited 2 ("no run ... faster than 5.0 m/s"). With ``--platform``
+    a walker standing still starts at rest within 30 s of the first fix; with the defaults a
+    platform that moves slowly starts after 30 s of motion and says it is slower than a car. Both
+    follow the fixes (horizontal RMS within 1.5 x the fixes' sigma)."""
+    import json
+    import warnings
+
+    d = tmp_path / "sim"
+    code, _, err = run_cli(["simulate", kind, "--out", d, "--seed", "23", "--start", start,
+                            "--duration", "120"], capsys)
+    assert code == 0, err
+    out = tmp_path / "sol.csv"
+    extra = [] if platform is None else ["--platform", platform]
+    code, so, err = run_cli(["navigate", "--imu", d / "imu.csv", "--gnss", d / "gnss.csv",
+                             "--out", out, "--json", *extra], capsys)
+    assert code == 0, err
+    js = json.loads(so)
+    g = selfnav.read_gnss(d / "gnss.csv")
+    assert js["nhc"] is True      # both move along their nose: NHC with a mounting-yaw state
+    if platform is None:
+        # auto waits for 30 s of motion in the fixes (a car leaving a parking place creeps)
+        assert js["start_s"] - g.t[0] <= 45.0
+        assert js["platform"] == "auto" and "slower than a car" in err
+    else:
+        assert js["start_s"] - g.t[0] <= 30.0
+        assert js["platform"] == platform and js["start_kind"] == start
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")            # coverage: the start is after the first fix
+        ev = selfnav.evaluate(selfnav.read_solution(d / "truth.csv"), selfnav.read_solution(out))
+    assert ev["horizontal_rms_m"] < 1.5 * math.sqrt(2) * float(np.median(g.sigma_m))
