@@ -93,6 +93,7 @@ def test_real_ctrl_c_old_set_or_new_set(tmp_path):
         if p.returncode == 130:
             assert err.decode().strip() == "selfnav: interrupted"
         else:
-            assert p.returncode == 0
+            # (once, under CI load, exit 1 at one of these moments: what it said, to find why)
+            assert p.returncode == 0, (frac, p.returncode, err.decode()[-2000:])
         assert sorted(x.name for x in tmp_path.iterdir()) == ["sim"]
     assert seen <= {"2", "3"}
