@@ -2,6 +2,8 @@
 first fix, and how well does it follow — SIMULATED data (selfnav.simulate).
 
     python benchmarks/platforms_start.py [--seeds 30 31 32] [--duration 300] [--mode profile|auto]
+    python benchmarks/platforms_start.py --rtk-walk [--seeds 40 41 42]
+    python benchmarks/platforms_start.py --ship [--seeds 1 2]
 
 Per platform and start (at rest / moving): seconds from the first fix to the start, the start
 kind and heading source, horizontal RMS (and the fixes' σ) and heading RMS over the whole
@@ -9,6 +11,11 @@ solution and from 60 s after the start (the heading hypotheses resolved), the la
 at the end of the issue's outages (10 s every 30 s for the walker and the rover, 30 s every
 120 s for the boat and the drone, from 60 s after the start; a second run), the CPU time of
 the clean run. ``--mode profile`` passes ``platform=<the platform>``; ``auto`` the defaults.
+
+``--rtk-walk``: the issue's handheld walk, simulated — 5 Hz fixes of 2 cm without drift, the
+walker standing 30 s first — with ``--platform pedestrian`` and with ``--no-nhc``, outages of
+10 s every 30 s from 30 s after the start. ``--ship``: the ``ship`` scenario (yaw ±5° about its
+course at 6 m/s) with the defaults, ``--no-nhc`` and ``--platform boat``.
 """
 from __future__ import annotations
 
@@ -19,30 +26,33 @@ import warnings
 import numpy as np
 
 import selfnav
+from selfnav.earth import enu_offset
 
 PLATFORMS = ("pedestrian", "rover", "boat", "drone")
-
 
 #: outages of the issue's acceptance: (length, period) s — 10 s every 30 s for the slow ground
 #: platforms, 30 s every 120 s for the boat and the drone
 OUTAGES = {"pedestrian": (10.0, 30.0), "rover": (10.0, 30.0), "boat": (30.0, 120.0),
            "drone": (30.0, 120.0)}
 
+RTK_WALK = {"scenario": {"kind": "pedestrian", "duration": 240, "start": "rest"},
+            "gnss": {"rate_hz": 5, "sigma_m": 0.02, "correlated_sigma_m": 0.0,
+                     "spike_rate": 0.0}}
 
-def outage_ends(kind, start, seed, duration, kw, t_from):
-    """Largest horizontal error at the end of each outage (the last row before the fixes
-    come back), the outages from ``t_from`` on."""
-    from selfnav.earth import enu_offset
 
-    sim = selfnav.simulate(kind, seed=seed, duration=duration, start=start)
-    gnss = sim.gnss.as_gnss()
-    length, period = OUTAGES[kind]
-    phase = (gnss.t - t_from) % period
-    cut = (gnss.t >= t_from) & (phase >= period - length)
+def _navigate(imu, gnss, kw):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        sol = selfnav.navigate(sim.imu, gnss.select(~cut), **kw)
-    tr = sol.trajectory
+        return selfnav.navigate(imu, gnss, **kw)
+
+
+def outage_ends(sim, kw, t_from, length, period):
+    """Largest horizontal error at the end of each outage (the last row before the fixes
+    come back) of a run without the fixes of ``length`` s every ``period`` s from ``t_from``."""
+    gnss = sim.gnss.as_gnss()
+    phase = (gnss.t - t_from) % period
+    cut = (gnss.t >= t_from) & (phase >= period - length)
+    tr = _navigate(sim.imu, gnss.select(~cut), kw).trajectory
     ends = []
     for t_end in np.arange(t_from + period, gnss.t[-1], period):
         k = np.searchsorted(tr.t, t_end) - 1
@@ -59,44 +69,84 @@ def one(kind, start, seed, duration, mode):
     gnss = sim.gnss.as_gnss()
     kw = {} if mode == "auto" else {"platform": kind}
     t0 = time.process_time()
+    try:
+        sol = _navigate(sim.imu, gnss, kw)
+    except selfnav.errors.SelfnavError as e:
+        return dict(kind=kind, start=start, seed=seed, error=str(e)[:60])
+    cpu = time.process_time() - t0
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        try:
-            sol = selfnav.navigate(sim.imu, gnss, **kw)
-        except selfnav.errors.SelfnavError as e:
-            return dict(kind=kind, start=start, seed=seed, error=str(e)[:60])
         ev = selfnav.evaluate(sim.truth, sol)
         tr = sol.trajectory
         late = selfnav.evaluate(sim.truth, tr.select(tr.t >= sol.stats["start_s"] + 60.0))
     st = sol.stats
-    out_max = outage_ends(kind, start, seed, duration, kw, st["start_s"] + 60.0)
+    out_max = outage_ends(sim, kw, st["start_s"] + 60.0, *OUTAGES[kind])
     return dict(kind=kind, start=start, seed=seed, delay=st["start_s"] - gnss.t[0], out=out_max,
                 start_kind=st.get("start_kind"), heading=st.get("start_heading"),
                 rms=ev["horizontal_rms_m"], sigma=float(np.median(gnss.sigma_m)),
                 hdg=ev["heading_rms_deg"], hdg60=late["heading_rms_deg"],
-                rms60=late["horizontal_rms_m"], cpu=time.process_time() - t0)
+                rms60=late["horizontal_rms_m"], cpu=cpu)
+
+
+def rtk_walk(seeds):
+    print("| seed | options | start after 1st fix s | horizontal RMS m | heading RMS ° | "
+          "10 s outage ends, max m |")
+    print("| ---: | --- | ---: | ---: | ---: | ---: |")
+    for seed in seeds:
+        sim = selfnav.simulate(RTK_WALK, seed=seed)
+        gnss = sim.gnss.as_gnss()
+        for kw in ({"platform": "pedestrian"}, {"nhc": False}):
+            sol = _navigate(sim.imu, gnss, kw)
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                ev = selfnav.evaluate(sim.truth, sol)
+            t_from = sol.stats["start_s"] + 30.0
+            print(f"| {seed} | {kw} | {sol.stats['start_s'] - gnss.t[0]:.0f} | "
+                  f"{ev['horizontal_rms_m']:.3f} | {ev['heading_rms_deg']:.1f} | "
+                  f"{outage_ends(sim, kw, t_from, 10.0, 30.0):.2f} |", flush=True)
+
+
+def ship(seeds):
+    print("| seed | options | horizontal RMS m | heading RMS ° |")
+    print("| ---: | --- | ---: | ---: |")
+    for seed in seeds:
+        sim = selfnav.simulate("ship", seed=seed, duration=300)
+        gnss = sim.gnss.as_gnss()
+        for kw in ({}, {"nhc": False}, {"platform": "boat"}):
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                ev = selfnav.evaluate(sim.truth, _navigate(sim.imu, gnss, kw))
+            print(f"| {seed} | {kw or 'defaults'} | {ev['horizontal_rms_m']:.1f} | "
+                  f"{ev['heading_rms_deg']:.1f} |", flush=True)
 
 
 def main():
     ap = argparse.ArgumentParser()
-    ap.add_argument("--seeds", type=int, nargs="+", default=[30, 31, 32])
+    ap.add_argument("--seeds", type=int, nargs="+", default=None)
     ap.add_argument("--duration", type=float, default=300.0)
     ap.add_argument("--mode", choices=("profile", "auto"), default="profile")
+    ap.add_argument("--rtk-walk", action="store_true")
+    ap.add_argument("--ship", action="store_true")
     a = ap.parse_args()
+    if a.rtk_walk:
+        return rtk_walk(a.seeds or [40, 41, 42])
+    if a.ship:
+        return ship(a.seeds or [1, 2])
     print("| platform | start | seed | start after 1st fix s | kind / heading | horizontal RMS m "
           "(fix σ) | from 60 s after the start | heading RMS ° | from 60 s after | outage ends "
           "max m | CPU s |")
     print("| --- | --- | ---: | ---: | --- | ---: | ---: | ---: | ---: | ---: | ---: |")
     for kind in PLATFORMS:
         for start in ("rest", "moving"):
-            for seed in a.seeds:
+            for seed in a.seeds or [30, 31, 32]:
                 r = one(kind, start, seed, a.duration, a.mode)
                 if "error" in r:
                     print(f"| {kind} | {start} | {seed} | no start: {r['error']} | | | | | | | |")
                     continue
                 print(f"| {kind} | {start} | {seed} | {r['delay']:.1f} | {r['start_kind']} / "
                       f"{r['heading']} | {r['rms']:.2f} ({r['sigma']:.2f}) | {r['rms60']:.2f} | "
-                      f"{r['hdg']:.1f} | {r['hdg60']:.1f} | {r['out']:.1f} | {r['cpu']:.1f} |", flush=True)
+                      f"{r['hdg']:.1f} | {r['hdg60']:.1f} | {r['out']:.1f} | {r['cpu']:.1f} |",
+                      flush=True)
 
 
 if __name__ == "__main__":

@@ -90,9 +90,10 @@ def register(app: typer.Typer) -> None:
         platform: Annotated[str, opt.choice_option(
             "--platform", choices=opt.PLATFORMS,
             help="What carries the IMU: its motion constraints and its start (auto: a car's, "
-                 "and a platform slower than a car's start is started anyway, without the "
-                 "NHC; pedestrian, rover, boat, aircraft, drone start at rest or moving at "
-                 "any speed, no NHC).")] = "auto",
+                 "and a platform that moves slower than a car's start needs is started as a "
+                 "slow platform; pedestrian, rover, boat, aircraft, drone start at once, at "
+                 "rest or moving at any speed; NHC with a mounting-yaw state for pedestrian "
+                 "and rover, none for boat, aircraft, drone).")] = "auto",
         nhc: Annotated[Optional[bool], typer.Option(
             "--nhc/--no-nhc", help="Non-holonomic constraint (default: as the platform "
                                    "says; on for a car).")] = None,

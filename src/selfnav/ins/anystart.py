@@ -126,7 +126,7 @@ def _steady(mag) -> bool:
         u.mean(axis=0)))
 
 
-def fixes_window(gnss: GnssData, sig_h, window_s: float, min_fixes: int = 3):
+def fixes_window(gnss: GnssData, window_s: float, min_fixes: int = 3):
     """Indices of the last ``window_s`` of fixes (at least ``min_fixes``)."""
     t = np.asarray(gnss.t, float)
     sel = np.flatnonzero(t >= t[-1] - window_s)
@@ -174,14 +174,15 @@ def init_anywhere(imu: ImuData, gnss: GnssData, cfg: FilterConfig, sig_h,
     -------
     dict
         As :func:`selfnav.ins.align.init_from_gnss`, plus ``start_kind`` (``"rest"`` or
-        ``"moving"``) and ``heading_source`` (``"course"`` or ``"unknown"``).
+        ``"moving"``) and ``heading_source`` (``"course"``, ``"magnetometer"`` or
+        ``"unknown"``).
     """
     ini = cfg.init
     sig_h = np.asarray(sig_h, float)
     sel = (course_window(gnss, sig_h, ini.any_window_s, ini.course_window_s)
            if ini.course_heading else None)
     if sel is None:
-        sel = fixes_window(gnss, sig_h, ini.any_window_s)
+        sel = fixes_window(gnss, ini.any_window_s)
     t = np.asarray(gnss.t, float)[sel]
     t0 = float(np.mean(t))
     t_used = float(t[-1])
@@ -338,7 +339,7 @@ def displaced(gnss: GnssData, sig_h, window_s: float = 30.0) -> bool:
     than ``3 √2 σ`` (σ their median) and :data:`MIN_DISPLACEMENT_M` from the last one, and a
     straight-line fit's speed is beyond three of its σ and :data:`MIN_SPEED` (an RTK
     receiver at rest wanders by centimetres, many of its σ)."""
-    sel = fixes_window(gnss, sig_h, window_s, min_fixes=2)
+    sel = fixes_window(gnss, window_s, min_fixes=2)
     xy = enu_offset(gnss.lat[sel[-1]], gnss.lon[sel[-1]], 0.0, gnss.lat[sel], gnss.lon[sel],
                     0.0)[:, :2]
     s = np.asarray(sig_h, float)[sel]
@@ -352,7 +353,7 @@ def displaced(gnss: GnssData, sig_h, window_s: float = 30.0) -> bool:
 
 def recent_speed(gnss: GnssData, sig_h, window_s: float = 10.0) -> float:
     """Horizontal speed of a straight-line fit over the last ``window_s`` of fixes, m/s."""
-    sel = fixes_window(gnss, sig_h, window_s)
+    sel = fixes_window(gnss, window_s)
     t = np.asarray(gnss.t, float)[sel]
     xy = enu_offset(gnss.lat[sel[0]], gnss.lon[sel[0]], 0.0, gnss.lat[sel], gnss.lon[sel],
                     0.0)[:, :2]

@@ -280,7 +280,7 @@ class VehicleConstraints:
     Attributes
     ----------
     platform : the platform profile these constraints came from (:data:`PLATFORMS`; ``auto``:
-        a car's, with the non-holonomic constraint dropped when the start shows no car)
+        a car's, with :data:`SLOW_PLATFORM`'s constraints when the start shows no car)
     nhc : a car does not slide sideways or jump
     nhc_sigma : m/s, lateral (and vertical) velocity at the NHC point
     nhc_sigma_up : m/s, vertical if it differs from lateral
@@ -545,8 +545,8 @@ class FilterConfig:
 #: heading is from its course). A platform that moves along its nose keeps the sideways
 #: constraint with a mounting-yaw state for its offset (a handheld unit, a rover's slip): on
 #: simulated walkers and rovers it holds the heading up to 2 times closer than without
-#: (benchmarks/platforms_start.py); not a boat, which yaws about its course in the waves. ``auto`` is the car's, and the navigator drops the NHC when
-#: the start shows no car (:mod:`selfnav.ins.anystart`): it cannot tell a walker from a drone.
+#: (benchmarks/platforms_start.py); not a boat, which yaws about its course in the waves.
+#: ``auto`` is the car's, and :data:`SLOW_PLATFORM`'s when the start shows no car.
 PLATFORMS = {
     "car": dict(nhc=True, zupt=True, any_start="fallback", course_heading=True,
                 course_heading_sigma=4.0 * DEG),
@@ -569,7 +569,8 @@ PLATFORMS = {
     "drone": dict(nhc=False, zupt=True, zupt_speed=0.1, any_start="now", course_heading=False),
 }
 #: What ``auto`` becomes when the car's start finds no car (a platform moving slower than a
-#: car's start needs, :meth:`selfnav.ins.startup.StartUp.try_start`): no sideways constraint,
+#: car's start needs, :meth:`selfnav.ins.startup.StartUp.try_start`): the sideways constraint
+#: with a mounting-yaw state (it removed two diverging walker and rover starts, 313 m and 26 m),
 #: zero-velocity updates only when the INS is nearly still, the course a loose heading.
 SLOW_PLATFORM = dict(nhc=True, mount_states=True, mount_sigma=15.0 * DEG, zupt_speed=0.1,
                      course_heading=True, course_heading_sigma=20.0 * DEG)

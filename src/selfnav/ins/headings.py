@@ -93,7 +93,12 @@ class HeadingHypotheses:
             spacing = span / (n + 0.5)
         if 2 * n * spacing > 2.0 * math.pi:
             spacing = 2.0 * math.pi / (2 * n + 1)
-        sub = (min(split_sigma, 0.5 * spacing) if n_full <= n else 0.5 * spacing) if n else sig
+        if not n:
+            sub = sig
+        elif n < n_full:
+            sub = 0.5 * spacing
+        else:
+            sub = min(split_sigma, 0.5 * spacing)
         deltas = np.arange(-n, n + 1) * spacing
         col = P[:, _IPSI].copy()
         shrink = (1.0 - sub * sub / s2) / s2
