@@ -40,9 +40,11 @@ def test_the_realtime_loop_runs_as_written(capsys):
 
 @pytest.mark.xfail(reason="issue 18 open: a consumer IMU started in motion without a still "
                           "period is overconfident for its first minutes (the page's "
-                          "2-minute drive: p95 of error/σ_h 3.2); docs/ekf.md", strict=False)
+                          "2-minute drive: p95 of error/σ_h 3.2; 2.6 with the yaw-bias "
+                          "hypotheses, not the default yet); docs/ekf.md", strict=False)
 def test_the_realtime_loop_sigma_covers_the_truth(capsys):
     rows, sim, _ = _run_page(capsys)
     a, tr = rows.trajectory, sim.truth
     e = _horizontal(a, np.interp(a.t, tr.t, tr.lat), np.interp(a.t, tr.t, tr.lon))
-    assert np.percentile(e / rows.sigma_h, 95) < 3.0
+    p95 = np.percentile(e / rows.sigma_h, 95)
+    assert p95 < 3.0

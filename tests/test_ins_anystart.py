@@ -220,3 +220,38 @@ def test_the_start_anywhere_is_causal(kind, start, options):
     np.testing.assert_allclose(full.t[k], cut.t[m])
     d = enu_offset(full.lat[k], full.lon[k], 0.0, cut.lat[m], cut.lon[m], 0.0)
     assert np.max(np.hypot(d[:, 0], d[:, 1])) < 1e-3
+
+
+def test_the_yaw_bias_split_is_a_gaussian_sum_of_the_prior():
+    """A start unsure of its z gyro bias (a consumer part's 1 °/s, moving, no stop) split by
+    ``yaw_bias_split_sigma``: in every heading hypothesis the same bias offsets, each filter
+    conditioned on its offset, and the sum's weights and widths give back the prior's mean and
+    σ (moment matching, to a few per cent)."""
+    sim, imu, gnss = _sim("pedestrian", "rest")
+    cfg = ic.navigator_config(platform="pedestrian")
+    init = init_anywhere(*_upto(imu, gnss, 25.0), cfg,
+                         np.full(int(np.sum(gnss.t <= 25.0)), 1.8))
+    flt = initial_filter(cfg, init)
+    iz = 11
+    s_b = math.radians(1.0)
+    flt.P[iz, :] = 0.0
+    flt.P[:, iz] = 0.0
+    flt.P[iz, iz] = s_b**2
+    flt.P[8, 8] = math.radians(10.0) ** 2
+    b0 = float(flt.bg[2])
+    hyp = HeadingHypotheses(flt, split_sigma=math.radians(3.0), max_hypotheses=31,
+                            prune_ratio=1e4, resolved_weight=0.99, max_s=120.0, gate=10.0,
+                            bias_split_sigma=math.radians(0.35), bias_split_max=7)
+    heads = np.unique(np.round(hyp.deltas, 9))
+    assert len(heads) > 1 and len(hyp.filters) == 7 * len(heads)
+    w = hyp.weights
+    b = np.array([f.bg[2] for f in hyp.filters]) - b0
+    assert np.allclose(b, hyp.bias_deltas, atol=1e-12)         # conditioned on its offset
+    sub2 = np.array([f.P[iz, iz] for f in hyp.filters])
+    offs = np.unique(np.round(hyp.bias_deltas, 12))
+    # 7 cannot cover ±2.5σ at 0.35 °/s: spread over it, each half the spacing wide
+    assert np.allclose(np.sqrt(sub2), 0.5 * np.min(np.diff(offs)), rtol=1e-6)
+    assert offs[-1] >= 2.0 * s_b
+    assert abs(float(w @ b)) < 1e-9
+    var = float(w @ (sub2 + b * b))
+    assert var == pytest.approx(s_b**2, rel=0.05)

@@ -49,6 +49,7 @@ ROADNAV_DEFAULTS = {
     "kinds": "white,gm,drift,drag",
     "startup_prob": 0.5,
     "odometer": 0,               # 1: simulate wheel speed and give it to the navigator
+    "yaw_bias_split_deg": 0.0,   # > 0: the navigator's yaw-bias hypotheses this wide, °/s
     "odo_sf_sigma": 0.005,
     "odo_quantum_mps": 0.01,
     "method": "ekf",
@@ -117,6 +118,21 @@ def longest_off_route(sim, lat, lon, t, limit_m=5.0):
     return worst * dt, float(1.0 - off.mean())
 
 
+def _navigator_options(params: dict) -> dict:
+    """Navigator options of a campaign's parameters: ``yaw_bias_split_deg`` > 0 turns on the
+    yaw-bias hypotheses (:mod:`selfnav.ins.headings`, off by default)."""
+    split = float(params.get("yaw_bias_split_deg", 0.0))
+    if split <= 0.0:
+        return {}
+    import dataclasses
+
+    from selfnav.ins.config import navigator_config
+
+    cfg = navigator_config()
+    init = dataclasses.replace(cfg.init, yaw_bias_split_sigma=float(np.radians(split)))
+    return {"config": dataclasses.replace(cfg, init=init)}
+
+
 def run_roadnav(seed: int, params: dict) -> dict:
     """One simulated drive through ``navigate --map`` and ``evaluate --map`` (module
     docstring); returns the run's row."""
@@ -132,7 +148,8 @@ def run_roadnav(seed: int, params: dict) -> dict:
         use_map = int(params["map_aid"]) if int(params["map_aid"]) >= 0 else seed % 2
         try:
             sol = api.navigate(sim.imu, sim.gnss.as_gnss(), graph if use_map else None,
-                               method=str(params["method"]), odometer=sim.odometer)
+                               method=str(params["method"]), odometer=sim.odometer,
+                               **_navigator_options(params))
         except SelfnavError:                # no start in the whole drive: a row that says so
             sol = None
     if sol is None:

@@ -197,6 +197,14 @@ class Initialisation:
         sure of its heading is split into hypotheses this wide, a Gaussian sum the fixes
         resolve (:mod:`selfnav.ins.headings`; None: never split) — a policy of the estimator
     heading_split_max : the most hypotheses (a start with no heading: the whole circle)
+    yaw_bias_split_sigma : the filter's linear range for the z gyro's bias (σ, rad/s): a start
+        less sure of it (a consumer gyro's 1 °/s, moving, no stop to measure it) is split,
+        within each heading hypothesis, into hypotheses this wide — a policy; a 0.7 °/s error
+        at σ 0.35 °/s left a simulated consumer start 26° off after a minute, 0.35 °/s
+        converged. None (the default, for now): never — 0.35 °/s is measured in
+        docs/ekf.md (fewer overconfident simulated drives, but drive_0708's −0.3 s IMU shift
+        found to 0.031 s instead of 0.03)
+    yaw_bias_split_max : the most yaw-bias hypotheses per heading hypothesis
     heading_prune_ratio : a hypothesis this many times less likely than the best is dropped
     heading_resolved_weight : the sum collapses to its best hypothesis once it holds this
         share of the weight
@@ -242,6 +250,8 @@ class Initialisation:
     course_heading_sigma: float = 4.0 * DEG
     heading_split_sigma: float | None = 3.0 * DEG
     heading_split_max: int = 31
+    yaw_bias_split_sigma: float | None = None
+    yaw_bias_split_max: int = 7
     heading_prune_ratio: float = 1e4
     heading_resolved_weight: float = 0.99
     heading_resolve_max_s: float = 120.0

@@ -36,6 +36,7 @@ from selfnav.earth import enu_offset
 from selfnav.ins.ekf import IBA, IBG, IP, IR, IV, output_covariance
 
 _IPSI = 8            # ψ_U in the error state
+_IBZ = IBG.start + 2  # the z gyro's bias
 
 
 def state_difference(a, b) -> np.ndarray:
@@ -65,6 +66,44 @@ def state_difference(a, b) -> np.ndarray:
     return dx
 
 
+def _split_axis(P, i, split_sigma, max_hypotheses, span, *, wrap):
+    """Offsets ``δ_k`` splitting state ``i`` of covariance ``P`` over ``±span`` into
+    hypotheses about ``split_sigma`` wide, and their σ: ``([(δ_k, log prior weight)], σ_k)``
+    (module docstring). At most ``max_hypotheses``: then spread over the span, each as wide
+    as half the spacing (the gaps stay covered); ``wrap``: an angle (at most the circle)."""
+    s2 = float(P[i, i])
+    sig = math.sqrt(s2)
+    spacing = 2.0 * split_sigma
+    n_full = int(math.ceil(span / spacing))
+    n = min(n_full, (max_hypotheses - 1) // 2)
+    if n < n_full:
+        spacing = span / (n + 0.5)
+    if wrap and 2 * n * spacing > 2.0 * math.pi:
+        spacing = 2.0 * math.pi / (2 * n + 1)
+    if not n:
+        sub = sig
+    elif n < n_full:
+        sub = 0.5 * spacing
+    else:
+        sub = min(split_sigma, 0.5 * spacing)
+    deltas = np.arange(-n, n + 1) * spacing
+    return [(float(d), -0.5 * d * d / max(s2 - sub * sub, 1e-30)) for d in deltas], sub
+
+
+def _conditioned(flt, i, d, sub):
+    """A copy of ``flt`` conditioned on "state ``i`` is off by ``d``" with σ ``sub``: the
+    states correlated with it move with it (error-state convention: the correction removes
+    ``dx``)."""
+    P = flt.P
+    s2 = float(P[i, i])
+    col = P[:, i].copy()
+    f = flt.copy()
+    f._correct(-col * (d / s2))
+    f.P = P - (1.0 - sub * sub / s2) / s2 * np.outer(col, col)
+    f.P = 0.5 * (f.P + f.P.T)
+    return f
+
+
 class HeadingHypotheses:
     """The Gaussian sum over the heading of a start (module docstring).
 
@@ -79,43 +118,35 @@ class HeadingHypotheses:
     """
 
     def __init__(self, flt, *, split_sigma: float, max_hypotheses: int, prune_ratio: float,
-                 resolved_weight: float, max_s: float, gate: float):
-        P = flt.P
-        s2 = float(P[_IPSI, _IPSI])
-        sig = math.sqrt(s2)
-        span = min(3.0 * sig, math.pi)
-        spacing = 2.0 * split_sigma
-        n_full = int(math.ceil(span / spacing))
-        n = min(n_full, (max_hypotheses - 1) // 2)
-        if n < n_full:
-            # fewer hypotheses than the span needs at this width: spread them over the span,
-            # each as wide as half the spacing (the gaps stay covered)
-            spacing = span / (n + 0.5)
-        if 2 * n * spacing > 2.0 * math.pi:
-            spacing = 2.0 * math.pi / (2 * n + 1)
-        if not n:
-            sub = sig
-        elif n < n_full:
-            sub = 0.5 * spacing
-        else:
-            sub = min(split_sigma, 0.5 * spacing)
-        deltas = np.arange(-n, n + 1) * spacing
-        col = P[:, _IPSI].copy()
-        shrink = (1.0 - sub * sub / s2) / s2
-        self.filters, logw = [], []
-        for d in deltas:
-            f = flt.copy()
-            # the hypothesis "the heading is off by d": the states correlated with the heading
-            # move with it (error-state convention: the correction removes dx)
-            f._correct(-col * (d / s2))
-            f.P = P - shrink * np.outer(col, col)
-            f.P = 0.5 * (f.P + f.P.T)
-            f.track_transition = flt.track_transition
-            f.q_scale, f.bias_scale = flt.q_scale, flt.bias_scale
-            self.filters.append(f)
-            logw.append(-0.5 * d * d / max(s2 - sub * sub, 1e-12))
+                 resolved_weight: float, max_s: float, gate: float,
+                 bias_split_sigma: float | None = None, bias_split_max: int = 1):
+        # the heading first, over at most the whole circle; then, in each, the yaw-rate bias
+        # (a consumer gyro's 1 °/s turns the heading out of the linear range within seconds)
+        heads, sub = _split_axis(flt.P, _IPSI, split_sigma, max_hypotheses,
+                                 min(3.0 * math.sqrt(float(flt.P[_IPSI, _IPSI])), math.pi),
+                                 wrap=True)
+        self.filters, logw, deltas, bias_deltas = [], [], [], []
+        for d, lw in heads:
+            fh = _conditioned(flt, _IPSI, d, sub)
+            fh.track_transition = flt.track_transition
+            fh.q_scale, fh.bias_scale = flt.q_scale, flt.bias_scale
+            s_b = math.sqrt(max(float(fh.P[_IBZ, _IBZ]), 0.0))
+            if bias_split_sigma is None or s_b <= 1.5 * bias_split_sigma:
+                biases, sub_b = [(0.0, 0.0)], s_b
+            else:
+                biases, sub_b = _split_axis(fh.P, _IBZ, bias_split_sigma, bias_split_max,
+                                            2.5 * s_b, wrap=False)
+            for db, lwb in biases:
+                f = _conditioned(fh, _IBZ, db, sub_b) if len(biases) > 1 else fh
+                f.track_transition = flt.track_transition
+                f.q_scale, f.bias_scale = flt.q_scale, flt.bias_scale
+                self.filters.append(f)
+                logw.append(lw + lwb)
+                deltas.append(d)
+                bias_deltas.append(db)
         self.logw = np.array(logw)
-        self.deltas = deltas
+        self.deltas = np.array(deltas)
+        self.bias_deltas = np.array(bias_deltas)
         self.acc = [[0.0, np.zeros(3), np.zeros(3)] for _ in self.filters]
         self.split_sigma = sub
         self.prune_ratio = prune_ratio
@@ -202,6 +233,7 @@ class HeadingHypotheses:
         self.acc = [self.acc[i] for i in idx]
         self.logw = self.logw[idx]
         self.deltas = self.deltas[idx]
+        self.bias_deltas = self.bias_deltas[idx]
         self._normalise()
 
     def resolved(self, t) -> bool:
@@ -212,7 +244,7 @@ class HeadingHypotheses:
 
     def agree(self) -> bool:
         """Have the hypotheses converged on one another? Each one's horizontal position,
-        velocity and heading within the best one's 1σ ellipsoid (Mahalanobis distance ≤ 1):
+        velocity, heading and yaw-rate bias within the best one's 1σ ellipsoid (Mahalanobis distance ≤ 1):
         the fixes corrected every filter towards the same state, and the weights, equal
         likelihoods from then on, would never separate them."""
         k = self.best
@@ -287,12 +319,15 @@ def _output_point(f):
 
 def split_heading(flt, cfg):
     """:class:`HeadingHypotheses` for ``flt`` when its heading σ is beyond the configured
-    linear range (``cfg.init.heading_split_sigma``), else None."""
+    linear range (``cfg.init.heading_split_sigma``), or its yaw-rate bias σ beyond
+    ``cfg.init.yaw_bias_split_sigma``, else None."""
     ini = cfg.init
     if ini.heading_split_sigma is None:
         return None
     s = math.sqrt(max(float(flt.P[_IPSI, _IPSI]), 0.0))
-    if s <= 1.5 * ini.heading_split_sigma:
+    s_b = math.sqrt(max(float(flt.P[_IBZ, _IBZ]), 0.0))
+    wide_b = ini.yaw_bias_split_sigma is not None and s_b > 1.5 * ini.yaw_bias_split_sigma
+    if s <= 1.5 * ini.heading_split_sigma and not wide_b:
         return None
     from selfnav.ins.policy import chi2_gate
 
@@ -301,7 +336,9 @@ def split_heading(flt, cfg):
                              prune_ratio=ini.heading_prune_ratio,
                              resolved_weight=ini.heading_resolved_weight,
                              max_s=ini.heading_resolve_max_s,
-                             gate=chi2_gate(2, cfg.integrity.p_false_alarm))
+                             gate=chi2_gate(2, cfg.integrity.p_false_alarm),
+                             bias_split_sigma=ini.yaw_bias_split_sigma,
+                             bias_split_max=ini.yaw_bias_split_max)
 
 
 __all__ = ["HeadingHypotheses", "split_heading", "state_difference"]
