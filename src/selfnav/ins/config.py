@@ -202,8 +202,8 @@ class Initialisation:
         within each heading hypothesis, into hypotheses this wide — a policy; a 0.7 °/s error
         at σ 0.35 °/s left a simulated consumer start 26° off after a minute, 0.35 °/s
         converged. None (the default, for now): never — 0.35 °/s is measured in
-        docs/ekf.md (fewer overconfident simulated drives, but drive_0708's −0.3 s IMU shift
-        found to 0.031 s instead of 0.03)
+        docs/ekf.md (fewer overconfident simulated drives, but drive_0708's IMU stamps
+        shifted by −0.3 s found as a 0.269 s shift, outside ±0.03 s)
     yaw_bias_split_max : the most yaw-bias hypotheses per heading hypothesis
     heading_prune_ratio : a hypothesis this many times less likely than the best is dropped
     heading_resolved_weight : the sum collapses to its best hypothesis once it holds this

@@ -17,10 +17,12 @@ the linear range), each a full filter conditioned on its offset::
     x_k = x + P[:, ψ_U] δ_k / σ²,   P_k = P − (1 − σ_k² / σ²) P[:, ψ_U] P[ψ_U, :] / σ²
 
 (the states correlated with the heading — the velocity of a start taken from the course —
-move with it), with prior weights ``N(δ_k; 0, σ² − σ_k²)``. Every IMU sample, constraint and
-fix goes to every hypothesis; each fix multiplies a hypothesis' weight by its likelihood
-(robust: its normalised innovation counts at most up to the gate, so one outlier cannot
-eliminate the right hypothesis). Hypotheses below ``1 / prune_ratio`` of the best are dropped;
+move with it), with prior weights ``N(δ_k; 0, σ² − σ_k²)``. With ``yaw_bias_split_sigma``
+set (off by default) each heading hypothesis is split the same way along the z gyro's bias
+(a consumer part's 1 °/s at a start in motion leaves the linear range within seconds). Every
+IMU sample, constraint and fix goes to every hypothesis; each fix multiplies a hypothesis'
+weight by its likelihood (robust: its normalised innovation counts at most up to the gate, so
+one outlier cannot eliminate the right hypothesis). Hypotheses below ``1 / prune_ratio`` of the best are dropped;
 when the best holds ``resolved_weight`` of the weight — or after ``max_s`` — the sum collapses
 to it, its covariance opened by the others' spread (moment matching about it: the σ stays
 honest). Until then every row reports the best hypothesis with the covariance of the whole
@@ -87,7 +89,7 @@ def _split_axis(P, i, split_sigma, max_hypotheses, span, *, wrap):
     else:
         sub = min(split_sigma, 0.5 * spacing)
     deltas = np.arange(-n, n + 1) * spacing
-    return [(float(d), -0.5 * d * d / max(s2 - sub * sub, 1e-30)) for d in deltas], sub
+    return [(float(d), -0.5 * d * d / max(s2 - sub * sub, 1e-12)) for d in deltas], sub
 
 
 def _conditioned(flt, i, d, sub):
@@ -128,8 +130,6 @@ class HeadingHypotheses:
         self.filters, logw, deltas, bias_deltas = [], [], [], []
         for d, lw in heads:
             fh = _conditioned(flt, _IPSI, d, sub)
-            fh.track_transition = flt.track_transition
-            fh.q_scale, fh.bias_scale = flt.q_scale, flt.bias_scale
             s_b = math.sqrt(max(float(fh.P[_IBZ, _IBZ]), 0.0))
             if bias_split_sigma is None or s_b <= 1.5 * bias_split_sigma:
                 biases, sub_b = [(0.0, 0.0)], s_b
@@ -244,7 +244,7 @@ class HeadingHypotheses:
 
     def agree(self) -> bool:
         """Have the hypotheses converged on one another? Each one's horizontal position,
-        velocity, heading and yaw-rate bias within the best one's 1σ ellipsoid (Mahalanobis distance ≤ 1):
+        velocity and heading within the best one's 1σ ellipsoid (Mahalanobis distance ≤ 1):
         the fixes corrected every filter towards the same state, and the weights, equal
         likelihoods from then on, would never separate them."""
         k = self.best
