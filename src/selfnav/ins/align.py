@@ -595,6 +595,16 @@ def init_from_gnss(imu, gnss: GnssData, cfg: FilterConfig, sig_h):
             out["tilt_bias_map"] = levelling_map(
                 att.dcm_nb_from_euler(roll, pitch, np.arctan2(v0[0], v0[1])).T)
         s_hdg = np.arctan2(sv, speed) + np.radians(2.0)
+        # the acceleration at the start: the start's velocity carries the IMU time offset's
+        # error through it (navigator.set_stamp_time)
+        acc = np.zeros(3)
+        for i in range(3):
+            y, k = ((gnss.velocity_n[sl, i], 1) if gnss.velocity_n is not None
+                    else (p[sl, i], 2))
+            ok = np.isfinite(y)
+            if ok.sum() > k + 1:
+                acc[i] = np.polyfit(tt[ok], y[ok], k)[0] * k
+        out["acceleration_n"] = acc
         out.update(C_nb=att.dcm_nb_from_euler(roll, pitch, hdg),
                    sigmas=([2 * sp, 2 * sp, 3 * sp], [2 * sv, 2 * sv, 2 * sv + 0.2],
                            [s_tilt, s_tilt, 2 * s_hdg]),

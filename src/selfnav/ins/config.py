@@ -202,8 +202,9 @@ class Initialisation:
         within each heading hypothesis, into hypotheses this wide — a policy; a 0.7 °/s error
         at σ 0.35 °/s left a simulated consumer start 26° off after a minute, 0.35 °/s
         converged. None (the default, for now): never — 0.35 °/s is measured in
-        docs/ekf.md (fewer overconfident simulated drives, but drive_0708's IMU stamps
-        shifted by −0.3 s found as a 0.269 s shift, outside ±0.03 s)
+        docs/ekf.md (fewer overconfident simulated drives, but one tuning drive 41 → 206 m
+        RMS: its hypotheses unresolved when a Gauss–Markov window began; drive_0708, whose
+        stop now gives its start the gyro bias, is the same either way)
     yaw_bias_split_max : the most yaw-bias hypotheses per heading hypothesis
     heading_prune_ratio : a hypothesis this many times less likely than the best is dropped
     heading_resolved_weight : the sum collapses to its best hypothesis once it holds this

@@ -641,6 +641,18 @@ class InsGnssFilter:
             dv += a * left
         return dr, dv
 
+    def advance(self, d):
+        """Move the nominal state ``d`` s along its motion — position by ``v d``, velocity by
+        ``a d``, attitude by the body's rotation ``ω d`` — the covariance untouched: the
+        state that fixes made under one time offset, expressed under an offset ``d`` s
+        later."""
+        dx = np.zeros(self.nx)
+        dx[IR] = -self.ins.velocity_n * d
+        dx[IV] = -self.acceleration_n * d
+        # C_bn ← exp([ψ]) C_bn (_correct_nav): the rotation over d, in navigation axes
+        dx[IP] = (self.ins.C_nb.T @ self.omega_b) * d
+        self._correct(dx)
+
     def predict(self, t, dtheta, dv, dt=None):
         """Mechanize a block of IMU increments and propagate the covariance over it."""
         t = np.asarray(t, dtype=float)

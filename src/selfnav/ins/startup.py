@@ -20,6 +20,7 @@ A state given by another navigator (``--init``) starts at once.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -164,7 +165,15 @@ class StartUp:
         if init is None:
             self.last_error = "no start on the map's roads yet"
             return None
-        return Start(dict(init), cfg, measured, notes)
+        init = dict(init)
+        if "gyro_bias" not in init and measured is not None and measured.gyro_bias is not None:
+            # a stop in the buffer measured the gyro bias (the Earth rate in its σ); the start
+            # in motion has not (its own look back is 30 s: drive_0708 crept for 18 s after
+            # its stop) and would begin from the grade's prior — a consumer part's 1 °/s
+            init["gyro_bias"] = np.asarray(measured.gyro_bias, float)
+            init["gyro_bias_sigma"] = np.full(3, math.hypot(measured.gyro_bias_sigma,
+                                                            cfg.imu.gyro_bias_instability))
+        return Start(init, cfg, measured, notes)
 
     def _fallback(self, imu, gnss, cfg, error):
         """The start of any platform (``any_start="fallback"``) once the fixes have shown
