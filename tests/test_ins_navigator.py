@@ -301,3 +301,54 @@ def test_advance_moves_the_state_along_its_motion():
     assert (f.ins.lat - lat) * rm == pytest.approx(0.0, abs=1e-6)
     assert f.ins.velocity_n[1] == pytest.approx(0.15, abs=1e-6)
     assert np.degrees(hdg0 - att.euler_from_dcm_nb(f.ins.C_nb)[2]) == pytest.approx(3.0, abs=0.01)
+
+
+def test_references_take_a_zero_velocity_update_only_for_samples_judged_still():
+    """The fault bank's references follow the IMU in steps; a step is still only where the
+    navigator judged every aiding block in it still — not with the verdict of the block before
+    (a reference once took a zero-velocity update over the second the car started to move in,
+    and was 2.5 m/s off at σ 0.2 m/s 20 s later: a false alarm on clean fixes)."""
+    from selfnav.ins.hypotheses import FaultBank, Reference
+
+    f = _filter_at(att.dcm_nb_from_euler(0.0, 0.0, np.radians(90.0)))
+    f.ins.set_state(velocity_n=np.zeros(3))
+    bank = FaultBank(f.cfg)
+    bank.refs = [Reference(0.0, f.copy())]
+    g = f.gravity(f.ins.lat, f.ins.h)
+    dt = np.full(20, 0.01)
+    t = np.arange(1, 21) * 0.01
+    dv = np.tile([0.0, 0.0, g * 0.01], (20, 1))      # at rest, level
+    dth = np.zeros((20, 3))
+    s0 = np.sqrt(bank.refs[0].flt.P[3, 3])
+    bank.on_imu(t[:10], dth[:10], dv[:10], dt[:10])   # the first step: flushed at once,
+    assert not bank._buf                              # before any verdict: moving
+    assert np.sqrt(bank.refs[0].flt.P[3, 3]) >= s0 * 0.99      # no ZUPT
+    bank.on_imu(t[10:], dth[10:], dv[10:], dt[10:])   # within the step: buffered
+    assert [b[4] for b in bank._buf] == [None]
+    bank.judged(True)
+    assert [b[4] for b in bank._buf] == [True]
+    bank.flush()
+    assert np.sqrt(bank.refs[0].flt.P[3, 3]) < 0.05          # judged still: ZUPT
+
+
+def test_a_consumer_start_in_motion_fuses_the_rest_of_its_window():
+    """A consumer IMU (1 °/s gyro biases, here 2.7 °/s on one axis) starting in motion from
+    10 m fixes: the start holds a quarter of its window's information and the fixes after its
+    time are fused with the rest. Left out (before), the IMU dead-reckoned half the window
+    with its biases unknown, came out tens of degrees tilted, and the drive — with clean
+    fixes all along — was 595 m RMS off, 1.8 km at worst, at σ 30–50 m (simulated campaign drive 6340898773912063126
+    of master seed 2, its outage and outliers removed)."""
+    from selfnav import campaigns
+    from selfnav.sim.scenarios import simulate
+
+    params = dict(campaigns.ROADNAV_DEFAULTS, map_aid=-1, grade="mixed", kinds="white,gm,outage")
+    spec, sim_seed, _ = campaigns.roadnav_scenario(6340898773912063126, params)
+    assert spec["imu"]["grade"] == "consumer"
+    spec["gnss"]["outages"], spec["gnss"]["outliers"] = [], []
+    sim = simulate(spec, seed=sim_seed)
+    sol = selfnav.navigate(sim.imu, sim.gnss.as_gnss())
+    t, dp, *_, ok = errors(sol, sim.truth)
+    e = np.hypot(dp[:, 0], dp[:, 1])
+    r = e / sol.columns["sigma_h_m"][ok]
+    assert np.sqrt(np.mean(e**2)) < 10.0, np.sqrt(np.mean(e**2))
+    assert np.percentile(r, 95) <= 3.0 and np.mean(r > 5.0) <= 0.01

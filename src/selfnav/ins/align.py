@@ -506,6 +506,13 @@ def course_heading_covariance(velocity_n, cov_v, sigma_course):
     return C, cv, float(w @ C @ w) / s**2 + float(sigma_course) ** 2
 
 
+#: The start's position and velocity σ are twice the fit's (:func:`init_from_gnss`,
+#: :func:`selfnav.ins.anystart.init_anywhere`): the start holds a quarter of its window's
+#: information, and the navigator fuses the fixes after the start's time with the other
+#: three quarters (σ / √(1 − 1/4)).
+START_FIX_SHARE = 0.25
+
+
 def init_from_gnss(imu, gnss: GnssData, cfg: FilterConfig, sig_h):
     """Initial state for a vehicle: the in-motion alignment.
 
@@ -557,7 +564,7 @@ def init_from_gnss(imu, gnss: GnssData, cfg: FilterConfig, sig_h):
         # the fixes of the window made this state: the filter must not take them again (they
         # are not independent of it) — it starts taking fixes after ``t_used``
         out = dict(t=t0, lat=lat, lon=lon, h=coef[0, 2], velocity_n=v0,
-                   t_used=float(gnss.t[sl][-1]))
+                   t_used=float(gnss.t[sl][-1]), fix_share=START_FIX_SHARE)
         still = _still_before(imu, t0, gnss, float(normal_gravity(lat, coef[0, 2])),
                               accel_bias=cfg.imu.accel_bias_sigma)
         if still is not None:

@@ -38,7 +38,9 @@ never give one. This start needs neither a speed nor a straight line:
    (:mod:`selfnav.ins.headings`).
 
 Everything is from the buffer it is given (the start-up stage's past); the fixes of the window
-are in the state, so the filter takes fixes after ``t_used`` only.
+are in the state with a quarter of their information (σ doubled, ``fix_share``), so the filter
+takes the window's fixes after the start's time with the rest of it and every fix after
+``t_used`` in full.
 """
 from __future__ import annotations
 
@@ -49,7 +51,7 @@ import numpy as np
 from selfnav import attitude as att
 from selfnav.earth import enu_offset, radii
 from selfnav.errors import SelfnavError
-from selfnav.ins.align import fix_sigmas, healthy_start
+from selfnav.ins.align import START_FIX_SHARE, fix_sigmas, healthy_start
 from selfnav.ins.config import FilterConfig, chi2_999
 from selfnav.ins.rest import (IGRF_DECLINATION_SIGMA_DEG, MAX_GYRO_BIAS, MAX_STILL_ACCEL_STD,
                               MAX_STILL_GYRO_STD, declination_at, find_still,
@@ -224,7 +226,7 @@ def init_anywhere(imu: ImuData, gnss: GnssData, cfg: FilterConfig, sig_h,
                  and np.linalg.norm(wj.mean(axis=0)) <= MAX_GYRO_BIAS)
     quiet = quiet or bool(find_still(imu.t, imu.omega_ib_b, imu.f_ib_b).mask[j0:j1].all())
     at_rest = bool(speed <= 3.0 * max(sv, 0.02) and quiet)
-    out = dict(t=t0, t_used=t_used, h=float(coef[0, 2]))
+    out = dict(t=t0, t_used=t_used, h=float(coef[0, 2]), fix_share=START_FIX_SHARE)
     if at_rest:
         lev = level_at_rest(imu.f_ib_b[j0:j1], imu.omega_ib_b[j0:j1], dt=dt,
                             accel_bias_sigma=accel_sig, lat=lat_r)

@@ -142,14 +142,26 @@ class FaultBank:
         self._sep_max = 0.0
 
     # ------------------------------------------------------------------ references
-    def on_imu(self, t, dtheta, dv, dt, still):
+    def on_imu(self, t, dtheta, dv, dt):
         """IMU increments that moved ``M`` (stamps ``t``): the references follow once per
-        ``reference_step_s``."""
+        ``reference_step_s``. Whether the samples were still is known only when the
+        navigator has judged their aiding block (:meth:`judged`): until then they count as
+        moving."""
         if not self.refs:
             return
-        self._buf.append((t, dtheta, dv, dt, still))
+        self._buf.append([t, dtheta, dv, dt, None])
         if t[-1] - self._t_step >= self.cfg.integrity.reference_step_s - 1e-9:
             self.flush()
+
+    def judged(self, still: bool):
+        """The navigator's stillness verdict on the aiding block just ended: it holds for the
+        buffered samples not yet judged. (Taking the previous block's verdict gave the
+        references a zero-velocity update over the second the vehicle started to move in:
+        0.4 m/s forced to zero at σ 0.02 m/s tilted them, and a reference 20 s old was
+        2.5 m/s off at σ 0.2 — a false alarm on clean fixes.)"""
+        for b in self._buf:
+            if b[4] is None:
+                b[4] = bool(still)
 
     def flush(self):
         """Bring every reference to the last IMU sample."""
@@ -159,7 +171,7 @@ class FaultBank:
         dth = np.concatenate([b[1] for b in self._buf])
         dv = np.concatenate([b[2] for b in self._buf])
         dt = np.concatenate([b[3] for b in self._buf])
-        still = all(b[4] for b in self._buf)
+        still = all(b[4] is True for b in self._buf)
         self._buf = []
         self._t_step = float(t[-1])
         veh = self.cfg.vehicle
