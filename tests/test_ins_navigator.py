@@ -352,3 +352,25 @@ def test_a_consumer_start_in_motion_fuses_the_rest_of_its_window():
     r = e / sol.columns["sigma_h_m"][ok]
     assert np.sqrt(np.mean(e**2)) < 10.0, np.sqrt(np.mean(e**2))
     assert np.percentile(r, 95) <= 3.0 and np.mean(r > 5.0) <= 0.01
+
+
+def test_a_start_made_inside_a_fault_is_given_up_when_the_fixes_heal():
+    """A start made on fixes that turn out faulty (the navigator started inside a 200 m
+    Gauss–Markov window, before any dead-reckoning reference of its own existed): once the
+    scattered fixes are healthy by themselves again, the INS — built on them — is what was
+    faulty, and is restarted from them. Before, nothing stood for the INS's side yet the
+    likelihood test asked for one, and the drive dead-reckoned 240 s past the window's end,
+    250–400 m off (simulated campaign drive 8709811347679610378 of master seed 7)."""
+    from selfnav import campaigns
+    from selfnav.sim.scenarios import simulate
+
+    params = dict(campaigns.ROADNAV_DEFAULTS, map_aid=-1, grade="mixed", kinds="white,gm,outage")
+    spec, sim_seed, wins = campaigns.roadnav_scenario(8709811347679610378, params)
+    gm = [w for w in wins if w.kind == "gm" and w.start == 0.0]
+    assert gm and spec["imu"]["grade"] == "industrial"
+    sim = simulate(spec, seed=sim_seed)
+    sol = selfnav.navigate(sim.imu, sim.gnss.as_gnss())
+    t, dp, *_ = errors(sol, sim.truth)
+    e = np.hypot(dp[:, 0], dp[:, 1])
+    after = (t > gm[0].end + 40.0) & (t < gm[0].end + 130.0)    # before the later outage
+    assert after.any() and e[after].max() < 20.0, e[after].max()

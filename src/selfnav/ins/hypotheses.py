@@ -73,6 +73,10 @@ class Episode:
     track: list = field(default_factory=list)   # the recent fixes by themselves
     characterised: bool = False
     t_fault: float | None = None                # the last time the fixes looked faulty
+    t_scattered: float | None = None            # the last time the fixes by themselves
+                                                # were no car's track (white, Gauss–Markov)
+    unwitnessed: bool = False                   # opened right after the (re)start, before
+                                                # any reference was branched
 
     def to_dict(self) -> dict:
         return {"start_s": self.t_start, "end_s": self.t_end, "kind": self.kind,
@@ -140,6 +144,8 @@ class FaultBank:
         self.reinits = 0
         self.recoveries = 0
         self._sep_max = 0.0
+        self.witnessed = False          # a reference has been branched since the (re)start
+        self.t_started = None           # the navigator's (re)start (set by the navigator)
 
     # ------------------------------------------------------------------ references
     def on_imu(self, t, dtheta, dv, dt):
@@ -198,6 +204,7 @@ class FaultBank:
                 and t - self._t_branch >= ig.branch_every_s - 1e-9:
             self.flush()
             self.refs.append(Reference(t, flt.copy()))
+            self.witnessed = True
             self._t_branch = t
         self._prune(t)
 
@@ -529,6 +536,7 @@ class FaultBank:
         P = np.array([f.p for f in tr])
         sig = np.array([f.sigma for f in tr])
         if healthy_start(tt, P, sig, window=len(tr) - 2) is None:
+            ep.t_scattered = t             # the fixes by themselves are no car's track
             return None
         s_fix = float(np.median(sig))
         # moving, with a course: the velocity at the last fix from a quadratic through the
@@ -540,7 +548,19 @@ class FaultBank:
         if np.hypot(*coef[1]) < max(self.cfg.init.reinit_speed, 2.0 * s_v):
             return None
         long = t - ep.t_start >= ig.max_fault_s and not self.mature(t)
-        if not long:
+        # the INS was started on the stream the bank now doubts — the episode opened within
+        # ``branch_after_s`` of the (re)start, before any reference of its own existed — and
+        # the fixes that followed were by themselves no car's track (white or Gauss–Markov;
+        # a drag's fixes stay a smooth track and keep the likelihood test: drive_0708, a drag
+        # 30 s after the start restarted on, 416 m off), and both a car's track and white
+        # about the dead reckoning over the whole run now (a Gauss–Markov stream can look
+        # like a car over 20 s, not also like the INS's path plus noise): nothing
+        # independent stands for the INS — the start itself is what was faulty (simulated
+        # drives started inside a 200 m Gauss–Markov window dead-reckoned 250 s past its end,
+        # 400 m off)
+        born_faulty = (ep.unwitnessed and ep.t_scattered is not None
+                       and ep.t_fault is not None and tr[0].t > ep.t_fault)
+        if not (long or born_faulty):
             if test is None or test["log_lost"] < -math.log(ig.p_false_alarm):
                 return None
             o = np.array([f.offset for f in tr[-ig.run_min_fixes:]]).mean(axis=0)
@@ -550,6 +570,7 @@ class FaultBank:
                 # run is fused with the fault's offset in its σ instead (_fault_continues)
                 return None
         why = (f"the episode outlasted {ig.max_fault_s:.0f} s" if long else
+               "the start was made on the fixes that turned out faulty" if born_faulty else
                f"the dead reckoning is off by more than its σ (log Bayes factor "
                f"{test['log_lost']:+.1f} over health and faults)")
         return (f"the INS was lost: {len(tr)} fixes over {tt[-1] - tt[0]:.0f} s agree with each "
@@ -681,7 +702,10 @@ class FaultBank:
     def _open(self, t, reset, sep=0.0):
         self.innov = []
         self.episode = Episode(t, reset=reset, kind="drag" if reset else "outliers",
-                               max_separation_m=sep)
+                               max_separation_m=sep,
+                               unwitnessed=(not self.witnessed and self.t_started is not None
+                                            and t - self.t_started
+                                            <= self.cfg.integrity.branch_after_s))
         self.run = []
         self.streak = 0
         self.used_streak = 0

@@ -585,6 +585,7 @@ class Navigator:
             self.vib_reference = None
         self.bank = FaultBank(cfg, self.adapter)
         t0 = float(init["t"])
+        self.bank.t_started = t0
         # a heading outside the filter's linear range: a Gaussian sum until the fixes resolve it
         self._hyp = split_heading(flt, cfg)
         if self._hyp is not None:
@@ -1105,6 +1106,8 @@ class Navigator:
         # the heading is the course of the fixes' velocity: one error with its cross part
         set_course_heading(flt, np.eye(2) * (2 * s_v) ** 2, att_s[2])
         self.bank.refs = []
+        self.bank.witnessed = False
+        self.bank.t_started = fx.t
         self._reset_flag = True
         self._t_last_fused = fx.t
         self.counts["reinitialisations"] += 1
