@@ -144,10 +144,15 @@ class FaultBank:
         self.reinits = 0
         self.recoveries = 0
         self._sep_max = 0.0
-        self.witnessed = False          # a reference has been branched since the (re)start
-        self.t_started = None           # the navigator's (re)start (set by the navigator)
+        self.t_started = None           # the navigator's (re)start (:meth:`restart`)
 
     # ------------------------------------------------------------------ references
+    def restart(self, t):
+        """The navigator (re)started at ``t``: no reference of the old INS stands for the new
+        one, and none of its own exists yet."""
+        self.refs = []
+        self.t_started = float(t)
+
     def on_imu(self, t, dtheta, dv, dt):
         """IMU increments that moved ``M`` (stamps ``t``): the references follow once per
         ``reference_step_s``. Whether the samples were still is known only when the
@@ -204,7 +209,6 @@ class FaultBank:
                 and t - self._t_branch >= ig.branch_every_s - 1e-9:
             self.flush()
             self.refs.append(Reference(t, flt.copy()))
-            self.witnessed = True
             self._t_branch = t
         self._prune(t)
 
@@ -703,7 +707,8 @@ class FaultBank:
         self.innov = []
         self.episode = Episode(t, reset=reset, kind="drag" if reset else "outliers",
                                max_separation_m=sep,
-                               unwitnessed=(not self.witnessed and self.t_started is not None
+                               unwitnessed=(self.t_started is not None
+                                            and self._t_branch < self.t_started
                                             and t - self.t_started
                                             <= self.cfg.integrity.branch_after_s))
         self.run = []

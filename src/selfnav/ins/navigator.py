@@ -585,7 +585,7 @@ class Navigator:
             self.vib_reference = None
         self.bank = FaultBank(cfg, self.adapter)
         t0 = float(init["t"])
-        self.bank.t_started = t0
+        self.bank.restart(t0)
         # a heading outside the filter's linear range: a Gaussian sum until the fixes resolve it
         self._hyp = split_heading(flt, cfg)
         if self._hyp is not None:
@@ -612,7 +612,7 @@ class Navigator:
         P0 = flt.P
         s_bg = math.sqrt(max(P0[IBG.start, IBG.start], P0[IBG.start + 1, IBG.start + 1]))
         s_v = math.sqrt(0.5 * (P0[3, 3] + P0[4, 4]))
-        if 0.5 * 9.8 * s_bg * (t_used - t0) ** 2 <= s_v:
+        if 0.5 * flt.gravity(flt.ins.lat, flt.ins.h) * s_bg * (t_used - t0) ** 2 <= s_v:
             share = 1.0
         for fx in st.fixes:
             if fx.t > t_used:
@@ -1105,9 +1105,7 @@ class Navigator:
         Pm[IP, IP] = np.diag([att_s[0] ** 2, att_s[1] ** 2, att_s[2] ** 2])
         # the heading is the course of the fixes' velocity: one error with its cross part
         set_course_heading(flt, np.eye(2) * (2 * s_v) ** 2, att_s[2])
-        self.bank.refs = []
-        self.bank.witnessed = False
-        self.bank.t_started = fx.t
+        self.bank.restart(fx.t)
         self._reset_flag = True
         self._t_last_fused = fx.t
         self.counts["reinitialisations"] += 1
