@@ -247,3 +247,27 @@ def test_a_drive_off_second_does_not_inherit_the_stops_bound():
         j, a_bound = _still_before(imu, t_end, gnss, g)
         tilt_error = np.arctan(f[j:j + 100, 1].mean() / g)
         assert np.arctan(a_bound / g) + np.radians(0.3) >= tilt_error, (t_end, imu.t[j], a_bound)
+
+
+def test_a_healthy_run_is_rarely_found_inside_a_gauss_markov_window_and_always_on_clean_fixes():
+    """The start waits for a run of healthy fixes (healthy_start), tried on every sliding run:
+    on the median of the second differences (and each below 4 σ) alone, 7.8 % of 120 s
+    Gauss–Markov windows (200 m, τ 60 s, 1 Hz, the campaigns') offered one somewhere —
+    simulated drives started inside them, hundreds of metres off. With their RMS beside it,
+    1.5 %; clean 10 m fixes still pass on the first run 98.5 % of the time (1000 windows;
+    here 200, simulated)."""
+    from selfnav.ins.align import healthy_start
+    from selfnav.sensors import outlier_errors
+
+    rng = np.random.default_rng(42)
+    n, s = 120, 10.0
+    t = np.arange(n, dtype=float)
+    found_gm = found_clean_first = 0
+    trials = 200
+    for _ in range(trials):
+        white = rng.normal(size=(n, 2)) * s
+        gm = outlier_errors("gm", n, 1.0, 200.0, 60.0, rng) + white
+        found_gm += healthy_start(t, gm, np.full(n, s)) is not None
+        found_clean_first += healthy_start(t, white, np.full(n, s)) == 0
+    assert found_gm / trials < 0.04
+    assert found_clean_first / trials > 0.95

@@ -11,6 +11,7 @@ from support import run_cli
 from selfnav import attitude as att
 from selfnav.cli import options as opt
 from selfnav.earth import enu_offset
+from selfnav.errors import SelfnavError
 from selfnav.ins import config as ic
 from selfnav.ins.anystart import UNKNOWN_HEADING_SIGMA, any_start, displaced, init_anywhere
 from selfnav.ins import feed
@@ -256,3 +257,56 @@ def test_the_yaw_bias_split_is_a_gaussian_sum_of_the_prior():
     assert abs(float(w @ b)) < 1e-9
     var = float(w @ (sub2 + b * b))
     assert var == pytest.approx(s_b**2, rel=0.05)
+
+
+def _quiet_platform(accel_y, seconds=32.0, sigma=10.0, seed=5):
+    """A quiet IMU (no vibration, as the simulator's car) at 100 Hz whose platform moves north
+    at ``v(t) = max(0, 6 − accel_y·(t − t0))``-like constant acceleration ``accel_y`` along its
+    forward axis (0: at rest), and 1 Hz fixes of σ ``sigma`` on its true track."""
+    rng = np.random.default_rng(seed)
+    g = 9.81
+    t = np.arange(0.0, seconds, 0.01)
+    f = np.tile([0.0, accel_y, g], (len(t), 1)) + rng.normal(size=(len(t), 3)) * 0.02
+    w = rng.normal(size=(len(t), 3)) * 0.002
+    imu = selfnav.ImuData(t, w, f)
+    tg = np.arange(0.0, seconds, 1.0)
+    v0 = -accel_y * seconds if accel_y < 0 else 0.0       # braking to a stop at the end
+    north = v0 * tg + 0.5 * accel_y * tg**2 + rng.normal(size=len(tg)) * sigma
+    east = rng.normal(size=len(tg)) * sigma
+    lat0 = math.radians(60.0)
+    lat = lat0 + north / 6.36e6
+    lon = math.radians(25.0) + east / (6.39e6 * math.cos(lat0))
+    gnss = selfnav.GnssData(tg, lat, lon, np.zeros(len(tg)), np.full(len(tg), sigma))
+    return imu, gnss
+
+
+@pytest.mark.parametrize("seconds", [5.0, 12.0, 32.0])
+def test_a_smooth_brake_on_a_quiet_imu_is_not_taken_for_rest(seconds):
+    """Simulated drive 8251062066923933128 (master seed 7) started "at rest" in the last 4 s of
+    a 1.86 m/s² brake: levelled on it, a 10.7° pitch error at σ 1.1° (700 m RMS). A quiet IMU
+    cannot tell a steady acceleration from rest; 10 m fixes over 4 s cannot either, so there is
+    no rest start until they can, and never one the tilt σ does not cover."""
+    a = -1.86
+    imu, gnss = _quiet_platform(a, seconds)
+    cfg = ic.navigator_config(platform="car")
+    try:
+        init = init_anywhere(imu, gnss, cfg, np.full(len(gnss.t), 10.0))
+    except SelfnavError as e:
+        assert "cannot yet tell rest" in str(e)
+        return
+    _, pitch, _ = att.euler_from_dcm_nb(init["C_nb"])
+    # the true pitch is zero: the levelled one is the brake's atan(a / g) unless σ covers it
+    assert abs(pitch) < 3.0 * init["sigmas"][2][1], (init["start_kind"], pitch)
+
+
+def test_a_quiet_imu_at_rest_starts_at_rest_once_the_fixes_bound_its_acceleration():
+    """At rest, 10 m fixes at 1 Hz: not after 5 s (a 6° tilt not yet bounded), at rest after
+    32 s, levelled with the acceleration the fixes leave open in its tilt σ."""
+    cfg = ic.navigator_config(platform="car")
+    imu, gnss = _quiet_platform(0.0, 5.0)
+    with pytest.raises(SelfnavError, match="cannot yet tell rest"):
+        init_anywhere(imu, gnss, cfg, np.full(len(gnss.t), 10.0))
+    imu, gnss = _quiet_platform(0.0, 32.0)
+    init = init_anywhere(imu, gnss, cfg, np.full(len(gnss.t), 10.0))
+    assert init["start_kind"] == "rest"
+    assert math.radians(0.5) < init["sigmas"][2][0] < math.radians(6.0)

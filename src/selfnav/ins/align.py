@@ -627,6 +627,11 @@ RAYLEIGH_MEDIAN = float(np.sqrt(2.0 * np.log(2.0)))
 #: a run of fixes is healthy while its median second difference stays below this many nominal
 #: Rayleigh medians (white 200 m outliers fail at once, a 200 m / 60 s drift on the median)
 HEALTHY_MEDIAN_RATIO = 1.6
+#: ... and their root mean square (per axis) below this many nominal σ (√6 σ): with the median
+#: alone 7.8 % of 120 s Gauss–Markov windows (200 m, τ 60 s, 1 Hz) offered a healthy run
+#: somewhere, with the RMS (the efficient statistic for Gaussian scatter) 1.5 %; clean 10 m
+#: fixes pass on their first run 98.5 % of the time (simulated, 1000 windows)
+HEALTHY_RMS_RATIO = 1.4
 
 
 def healthy_start(t, xy, sigma, window=20):
@@ -634,9 +639,10 @@ def healthy_start(t, xy, sigma, window=20):
 
     The second differences of the positions, ``z_k − 2 z_{k−1} + z_{k−2}`` (a constant-velocity
     predictor), have a per-axis σ of ``√6 σ`` plus the change of velocity; their median length
-    over the run must stay below ``1.6 ×`` its nominal Rayleigh median and each below ``4 √6 σ``.
-    White 200 m outliers fail at once; drifting ones (Gauss-Markov, 200 m σ, τ 60 s: 36 m per
-    second) fail on the median. Returns None when no such run exists. ``t`` must be ~regular.
+    over the run must stay below ``1.6 ×`` its nominal Rayleigh median, their RMS per axis below
+    ``1.4 √6 σ`` and each below ``4 √6 σ``. White 200 m outliers fail at once; drifting ones
+    (Gauss-Markov, 200 m σ, τ 60 s: 36 m per second) fail on the median and the RMS. Returns
+    None when no such run exists. ``t`` must be ~regular.
     """
     xy = np.asarray(xy, float)
     n = len(xy)
@@ -647,7 +653,9 @@ def healthy_start(t, xy, sigma, window=20):
     ok_each = d2 < 4.0 * s6
     for k in range(0, n - 2 - window + 1):
         seg = slice(k, k + window)
-        if ok_each[seg].all() and np.median(d2[seg]) < HEALTHY_MEDIAN_RATIO * RAYLEIGH_MEDIAN * float(np.median(s6[seg])):
+        s6k = float(np.median(s6[seg]))
+        if (ok_each[seg].all() and np.median(d2[seg]) < HEALTHY_MEDIAN_RATIO * RAYLEIGH_MEDIAN * s6k
+                and np.mean(d2[seg] ** 2) < 2.0 * (HEALTHY_RMS_RATIO * s6k) ** 2):
             return k     # fixes k .. k + window + 1 are healthy
     return None
 

@@ -19,7 +19,11 @@ never give one. This start needs neither a speed nor a straight line:
    on the mean specific force (:func:`selfnav.ins.rest.level_at_rest`: the accelerometer bias
    is in the tilt σ, ``σ_ba / g``), the gyro bias from the mean rate less the vertical Earth
    rate, the velocity zero (σ 0.05 m/s — a hand holding the unit trembles — and the fitted
-   speed: a rover creeping at 0.3 m/s is as quiet as one parked).
+   speed: a rover creeping at 0.3 m/s is as quiet as one parked). Quiet is not at rest: a
+   steady acceleration (a car braking smoothly) is as quiet and levelled is a tilt, so the
+   fixes over the longest trailing span of quiet IMU (up to 32 s) must show no motion and
+   bound the acceleration to a 6° tilt at one σ (:func:`_rest_verdict`; that σ joins the
+   tilt σ); until they can, no start.
    **Moving** — the specific force over the window, each sample carried by the gyros into the
    body frame at the window's start (:func:`selfnav.latitude.gyro_attitude`), averages to
    gravity plus the window's mean acceleration ``ā``; the fit's second-order term bounds
@@ -70,6 +74,11 @@ MAG_START_FLOOR_DEG = 20.0
 #: Motion the fallback start needs to see in the fixes, whatever their σ: metres, m/s
 MIN_DISPLACEMENT_M = 1.0
 MIN_SPEED = 0.1
+#: The longest trailing span of quiet IMU over which the fixes are asked to confirm rest, s
+REST_CONFIRM_LONGEST_S = 32.0
+#: A start at rest must bound, by its fixes, the steady acceleration a quiet IMU cannot tell
+#: from a tilt to this tilt (one σ), deg (:func:`_rest_verdict`): else no start yet
+REST_MAX_TILT_DEG = 6.0
 
 
 def _fit(t, x, w, t0, order):
@@ -159,6 +168,61 @@ def course_window(gnss: GnssData, sig_h, shortest_s: float, longest_s: float):
     return None
 
 
+def _quiet(imu: ImuData, still, j0: int, j1: int) -> bool:
+    """The IMU quiet over samples ``j0:j1``: its scatter within what a hand holding the unit
+    still shows (walking, driving, rocking are beyond it), or every sample still against the
+    buffer's own floor (``still``, :func:`selfnav.ins.rest.find_still`'s mask)."""
+    wj, fj = imu.omega_ib_b[j0:j1], imu.f_ib_b[j0:j1]
+    return bool(np.sqrt(np.mean(wj.std(axis=0) ** 2)) <= MAX_STILL_GYRO_STD
+                and np.sqrt(np.mean(fj.std(axis=0) ** 2)) <= MAX_STILL_ACCEL_STD
+                and np.linalg.norm(wj.mean(axis=0)) <= MAX_GYRO_BIAS) or bool(still[j0:j1].all())
+
+
+def _rest_verdict(imu: ImuData, still, gnss: GnssData, sig_h, t_end: float,
+                  shortest_s: float) -> tuple[bool, float]:
+    """Whether the fixes agree that a platform whose IMU is quiet is at rest, and the σ of the
+    steady acceleration they cannot exclude (m/s²).
+
+    A quiet IMU tells rest from a steady turn but not from a steady acceleration, which
+    levelling turns into a tilt (``atan(a / g)``: a car braking smoothly at 2 m/s², 12°). Over
+    the trailing spans of quiet IMU (``shortest_s`` doubling up to
+    :data:`REST_CONFIRM_LONGEST_S`), a weighted quadratic fit of the fixes (covariance scaled
+    by ``max(1, χ²/dof)``): a speed or an acceleration beyond three σ is motion; else rest,
+    with the acceleration σ of the longest span (an RTK receiver bounds it in seconds, a 10 m
+    one at 1 Hz in some 20 s of standing still).
+    """
+    t = np.asarray(gnss.t, float)
+    sig_h = np.asarray(sig_h, float)
+    spans, L = [], float(shortest_s)
+    while L < REST_CONFIRM_LONGEST_S:
+        spans.append(L)
+        L *= 2.0
+    spans.append(REST_CONFIRM_LONGEST_S)
+    held = t_end - max(float(imu.t[0]), float(t[0]))       # what the buffer holds
+    spans = sorted({min(L, held) for L in spans})
+    s_acc = np.inf
+    for L in spans:
+        j0 = int(np.searchsorted(imu.t, t_end - L))
+        j1 = int(np.searchsorted(imu.t, t_end, side="right"))
+        if np.isfinite(s_acc) and not _quiet(imu, still, j0, j1):
+            break
+        sel = np.flatnonzero((t >= t_end - L) & (t <= t_end))
+        m = len(sel)
+        if m < 4:
+            continue
+        xy = enu_offset(gnss.lat[sel[0]], gnss.lon[sel[0]], 0.0, gnss.lat[sel], gnss.lon[sel],
+                        0.0)[:, :2]
+        coef, cov, chi2 = _fit(t[sel], xy, 1.0 / sig_h[sel] ** 2, float(t[sel].mean()), 2)
+        dof = 2 * (m - 3)
+        scale = max(1.0, float(chi2.sum()) / dof) if dof > 0 else 1.0
+        sv, sa = math.sqrt(cov[1, 1] * scale), 2.0 * math.sqrt(cov[2, 2] * scale)
+        if (np.hypot(coef[1, 0], coef[1, 1]) > max(3.0 * sv, MIN_SPEED)
+                or 2.0 * np.hypot(coef[2, 0], coef[2, 1]) > 3.0 * sa):
+            return False, 0.0
+        s_acc = sa
+    return True, float(s_acc)
+
+
 def init_anywhere(imu: ImuData, gnss: GnssData, cfg: FilterConfig, sig_h,
                   magnetometer=()) -> dict:
     """The start of any platform from the buffered past (module docstring).
@@ -220,12 +284,17 @@ def init_anywhere(imu: ImuData, gnss: GnssData, cfg: FilterConfig, sig_h,
     accel_sig = float(cfg.imu.accel_bias_sigma)
     # still: the scatter of the window within what a hand holding the unit shows (walking,
     # driving, rocking are beyond it), or still against the buffer's own floor
-    wj, fj = imu.omega_ib_b[j0:j1], imu.f_ib_b[j0:j1]
-    quiet = bool(np.sqrt(np.mean(wj.std(axis=0) ** 2)) <= MAX_STILL_GYRO_STD
-                 and np.sqrt(np.mean(fj.std(axis=0) ** 2)) <= MAX_STILL_ACCEL_STD
-                 and np.linalg.norm(wj.mean(axis=0)) <= MAX_GYRO_BIAS)
-    quiet = quiet or bool(find_still(imu.t, imu.omega_ib_b, imu.f_ib_b).mask[j0:j1].all())
-    at_rest = bool(speed <= 3.0 * max(sv, 0.02) and quiet)
+    still = find_still(imu.t, imu.omega_ib_b, imu.f_ib_b).mask
+    at_rest = bool(speed <= 3.0 * max(sv, 0.02) and _quiet(imu, still, j0, j1))
+    s_rest_acc = 0.0
+    if at_rest:
+        # quiet is not at rest: a steady acceleration (a car braking smoothly) is as quiet, and
+        # levelled it is a tilt (2 m/s² a 12° one) — the fixes must rule it out first
+        at_rest, s_rest_acc = _rest_verdict(imu, still, gnss, sig_h, t_used, ini.any_window_s)
+        if at_rest and s_rest_acc > float(np.linalg.norm(imu.f_ib_b[j0:j1].mean(axis=0))) * \
+                math.tan(math.radians(REST_MAX_TILT_DEG)):
+            raise SelfnavError("the IMU is quiet but the fixes cannot yet tell rest from a "
+                               "steady acceleration")
     out = dict(t=t0, t_used=t_used, h=float(coef[0, 2]), fix_share=START_FIX_SHARE)
     if at_rest:
         lev = level_at_rest(imu.f_ib_b[j0:j1], imu.omega_ib_b[j0:j1], dt=dt,
@@ -235,7 +304,8 @@ def init_anywhere(imu: ImuData, gnss: GnssData, cfg: FilterConfig, sig_h,
         # window's mean rate and specific force wander from one part of it to the next, which
         # the white-noise σ of the mean does not see — the scatter of quarter-window means does
         sub_w, sub_t = _quarter_scatter(imu.omega_ib_b[j0:j1], imu.f_ib_b[j0:j1])
-        s_tilt = math.hypot(math.hypot(lev.sigma_roll, sub_t), math.radians(0.1))
+        s_tilt = math.hypot(math.hypot(lev.sigma_roll, sub_t), math.radians(0.1),
+                            math.atan(s_rest_acc / float(np.linalg.norm(lev.f_mean_b))))
         p0 = (w[:, None] * np.column_stack([xy, h])).sum(axis=0) / w.sum()
         out["h"] = float(p0[2])
         xy0 = p0[:2]
