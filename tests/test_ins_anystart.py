@@ -260,9 +260,10 @@ def test_the_yaw_bias_split_is_a_gaussian_sum_of_the_prior():
 
 
 def _quiet_platform(accel_y, seconds=32.0, sigma=10.0, seed=5):
-    """A quiet IMU (no vibration, as the simulator's car) at 100 Hz whose platform moves north
-    at ``v(t) = max(0, 6 − accel_y·(t − t0))``-like constant acceleration ``accel_y`` along its
-    forward axis (0: at rest), and 1 Hz fixes of σ ``sigma`` on its true track."""
+    """A quiet IMU (no vibration, as the simulator's car) at 100 Hz on a platform heading north
+    with a constant acceleration ``accel_y`` along its forward axis — negative: braking to a
+    stop at the end of the ``seconds``; 0: at rest — and 1 Hz fixes of σ ``sigma`` on its true
+    track."""
     rng = np.random.default_rng(seed)
     g = 9.81
     t = np.arange(0.0, seconds, 0.01)

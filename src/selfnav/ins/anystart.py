@@ -201,10 +201,10 @@ def _rest_verdict(imu: ImuData, still, gnss: GnssData, sig_h, t_end: float,
     held = t_end - max(float(imu.t[0]), float(t[0]))       # what the buffer holds
     spans = sorted({min(L, held) for L in spans})
     s_acc = np.inf
-    for L in spans:
+    for i, L in enumerate(spans):
         j0 = int(np.searchsorted(imu.t, t_end - L))
         j1 = int(np.searchsorted(imu.t, t_end, side="right"))
-        if np.isfinite(s_acc) and not _quiet(imu, still, j0, j1):
+        if i > 0 and not _quiet(imu, still, j0, j1):    # the first: the caller's window
             break
         sel = np.flatnonzero((t >= t_end - L) & (t <= t_end))
         m = len(sel)
@@ -284,17 +284,20 @@ def init_anywhere(imu: ImuData, gnss: GnssData, cfg: FilterConfig, sig_h,
     accel_sig = float(cfg.imu.accel_bias_sigma)
     # still: the scatter of the window within what a hand holding the unit shows (walking,
     # driving, rocking are beyond it), or still against the buffer's own floor
-    still = find_still(imu.t, imu.omega_ib_b, imu.f_ib_b).mask
-    at_rest = bool(speed <= 3.0 * max(sv, 0.02) and _quiet(imu, still, j0, j1))
-    s_rest_acc = 0.0
+    at_rest = bool(speed <= 3.0 * max(sv, 0.02))
+    still = find_still(imu.t, imu.omega_ib_b, imu.f_ib_b).mask if at_rest else None
+    at_rest = at_rest and _quiet(imu, still, j0, j1)
+    tilt_rest = 0.0
     if at_rest:
         # quiet is not at rest: a steady acceleration (a car braking smoothly) is as quiet, and
         # levelled it is a tilt (2 m/s² a 12° one) — the fixes must rule it out first
         at_rest, s_rest_acc = _rest_verdict(imu, still, gnss, sig_h, t_used, ini.any_window_s)
-        if at_rest and s_rest_acc > float(np.linalg.norm(imu.f_ib_b[j0:j1].mean(axis=0))) * \
-                math.tan(math.radians(REST_MAX_TILT_DEG)):
-            raise SelfnavError("the IMU is quiet but the fixes cannot yet tell rest from a "
-                               "steady acceleration")
+        if at_rest:
+            g_seen = float(np.linalg.norm(imu.f_ib_b[j0:j1].mean(axis=0)))
+            tilt_rest = math.atan(s_rest_acc / g_seen)
+            if tilt_rest > math.radians(REST_MAX_TILT_DEG):
+                raise SelfnavError("the IMU is quiet but the fixes cannot yet tell rest from a "
+                                   "steady acceleration")
     out = dict(t=t0, t_used=t_used, h=float(coef[0, 2]), fix_share=START_FIX_SHARE)
     if at_rest:
         lev = level_at_rest(imu.f_ib_b[j0:j1], imu.omega_ib_b[j0:j1], dt=dt,
@@ -304,8 +307,7 @@ def init_anywhere(imu: ImuData, gnss: GnssData, cfg: FilterConfig, sig_h,
         # window's mean rate and specific force wander from one part of it to the next, which
         # the white-noise σ of the mean does not see — the scatter of quarter-window means does
         sub_w, sub_t = _quarter_scatter(imu.omega_ib_b[j0:j1], imu.f_ib_b[j0:j1])
-        s_tilt = math.hypot(math.hypot(lev.sigma_roll, sub_t), math.radians(0.1),
-                            math.atan(s_rest_acc / float(np.linalg.norm(lev.f_mean_b))))
+        s_tilt = math.hypot(math.hypot(lev.sigma_roll, sub_t), math.radians(0.1), tilt_rest)
         p0 = (w[:, None] * np.column_stack([xy, h])).sum(axis=0) / w.sum()
         out["h"] = float(p0[2])
         xy0 = p0[:2]
