@@ -691,6 +691,7 @@ def robust_init(imu, gnss, graph=None, *, sigma=10.0, window=20, cfg: FilterConf
     g2 = gnss.select(sub)
     g2.sigma_m = sig[sub]
     init = dict(init_from_gnss(imu, g2, fc, sig[sub]))
+    init["t_healthy"] = float(gnss.t[k])        # where the healthy run begins
     if graph is not None:
         r0, _, k0 = att.euler_from_dcm_nb(init["C_nb"])
         xi, yi = graph.to_local(init["lat"], init["lon"])

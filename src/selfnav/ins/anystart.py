@@ -383,7 +383,9 @@ def any_start(imu: ImuData, gnss: GnssData, cfg: FilterConfig, magnetometer=()) 
     k = healthy_start(gnss.t, xy, sig, window)
     if k is None:
         raise SelfnavError(f"no run of {window} healthy GNSS fixes yet")
-    return init_anywhere(imu, gnss.select(slice(k, None)), cfg, sig[k:], magnetometer)
+    out = init_anywhere(imu, gnss.select(slice(k, None)), cfg, sig[k:], magnetometer)
+    out["t_healthy"] = float(gnss.t[k])         # where the healthy run begins
+    return out
 
 
 def moving_seconds(gnss: GnssData, sig_h, half_window_s: float = 5.0,

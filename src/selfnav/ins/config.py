@@ -303,6 +303,13 @@ class VehicleConstraints:
     zupt_accel_h : horizontal specific force below this, m/s²
     zupt_gyro : |ω| below this over the block, rad/s
     zupt_accel : std of |f| over the block below this, m/s²
+    zaru : a zero angular-rate update on the gyro biases (the IMU turns with the Earth only)
+        where the INS is slow (the ZUPT's speed gate) and the rates and specific force are
+        still within what the filter knows of its biases and tilt: a consumer gyro's 0.5 °/s
+        yaw bias, learnt wrong through a young start's turns, is measured at the first stop
+        (a policy)
+    zaru_sigma : rad/s, the least σ of one block's mean rate (the block's own scatter when
+        larger: vibration, quantisation)
     aid_step : interval of NHC / ZUPT / road updates, s
     odometer_sigma : m/s, white error of one wheel-speed sample (quantisation, slip)
     odometer_step : s, the shortest interval between odometer updates (faster samples are
@@ -329,6 +336,8 @@ class VehicleConstraints:
     zupt_accel_h: float = 0.1
     zupt_gyro: float = 1.0 * DEG
     zupt_accel: float = 0.15
+    zaru: bool = True
+    zaru_sigma: float = 0.01 * DEG
     aid_step: float = 0.2
     odometer_sigma: float = 0.05
     odometer_step: float = 0.2

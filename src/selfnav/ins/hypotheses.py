@@ -43,7 +43,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from selfnav.earth import enu_offset
-from selfnav.ins.measurements import NonHolonomic, ZeroVelocity
+from selfnav.ins.measurements import NonHolonomic, ZeroRate, ZeroVelocity
 from selfnav.ins.policy import FixStatus, chi2_gate, normal_quantile
 
 
@@ -160,9 +160,19 @@ class FaultBank:
         moving."""
         if not self.refs:
             return
-        self._buf.append([t, dtheta, dv, dt, None])
-        if t[-1] - self._t_step >= self.cfg.integrity.reference_step_s - 1e-9:
+        step = self.cfg.integrity.reference_step_s - 1e-9
+        while len(t):
+            # the step ends at the first sample that completes it, however the samples were
+            # handed over (one a call or in blocks: the same references)
+            j = int(np.searchsorted(t - self._t_step, step, side="left"))
+            if j >= len(t):
+                self._buf.append([t, dtheta, dv, dt, None])
+                return
+            self._buf.append([t[:j + 1], dtheta[:j + 1], dv[:j + 1], dt[:j + 1], None])
             self.flush()
+            if not self.refs:
+                return
+            t, dtheta, dv, dt = t[j + 1:], dtheta[j + 1:], dv[j + 1:], dt[j + 1:]
 
     def judged(self, still: bool):
         """The navigator's stillness verdict on the aiding block just ended: it holds for the
@@ -195,6 +205,9 @@ class FaultBank:
             f.propagate(float(dt[i:].sum()), sth, sdv)
             if still and veh.zupt:
                 f.update(ZeroVelocity(veh.zupt_sigma).model(f))
+                if veh.zaru:
+                    w = dth[i:] / dt[i:, None] - f.bg
+                    f.update(ZeroRate(w, veh.zaru_sigma).model(f))
             elif veh.nhc:
                 f.update(NonHolonomic(veh.nhc_sigma, veh.nhc_sigma_up or veh.nhc_sigma).model(f))
 

@@ -40,8 +40,8 @@ import numpy as np
 
 from selfnav import attitude as att
 from selfnav.attitude import rotvec_to_dcm3, skew3
-from selfnav.earth import enu_offset
-from selfnav.ins.ekf import IP, IV
+from selfnav.earth import OMEGA_EARTH, enu_offset
+from selfnav.ins.ekf import IBG, IP, IV
 
 #: indices of the position / velocity error states (the first six)
 _POS = (0, 1, 2)
@@ -236,6 +236,31 @@ class ZeroVelocity(Measurement):
 
 
 @dataclass
+class ZeroRate(Measurement):
+    """The IMU is still: it turns with the Earth only. A zero angular-rate update (ZARU) on
+    the gyro biases from one block of bias-corrected rates ``w_blk`` (N, 3), rad/s::
+
+        h(x) = C_nb ω_ie^n + δb_g,   z = mean(w_blk),   ∂h/∂δb_g = I
+
+    σ per axis: the block's own sample scatter (engine vibration, quantisation: the samples
+    taken as fully correlated, a bound) and at least ``sigma`` rad/s."""
+
+    w_blk: np.ndarray
+    sigma: float
+    kind = "zaru"
+
+    def model(self, flt) -> Model:
+        lat = flt.ins.lat
+        omega_ie_n = OMEGA_EARTH * np.array([0.0, np.cos(lat), np.sin(lat)])
+        w = np.asarray(self.w_blk, float)
+        r = flt.ins.C_nb @ omega_ie_n - w.mean(0)
+        H = np.zeros((3, flt.nx))
+        H[:, IBG] = np.eye(3)
+        s = np.maximum(w.std(0), self.sigma)
+        return Model(self.kind, r, H, np.diag(s**2))
+
+
+@dataclass
 class WheelSpeed(Measurement):
     """Wheel speed, m/s, at the NHC point in the vehicle frame, scaled by ``1 + k``::
 
@@ -373,5 +398,5 @@ class AlongTrackWiden:
 
 
 __all__ = ["Model", "Measurement", "PositionFix", "VelocityFix", "NonHolonomic",
-           "ZeroVelocity", "WheelSpeed", "Heading", "RoadLine", "LevelRoad", "RunVelocity",
+           "ZeroVelocity", "ZeroRate", "WheelSpeed", "Heading", "RoadLine", "LevelRoad", "RunVelocity",
            "vehicle_velocity", "_POS"]

@@ -46,7 +46,8 @@ from selfnav.ins.ekf import (IBA, IBG, IP, IR, IV, PACK, PACK_SIZE, InsGnssFilte
 from selfnav.ins.headings import split_heading
 from selfnav.ins.hypotheses import FaultBank
 from selfnav.ins.measurements import (Heading, NonHolonomic, PositionFix, RunVelocity,
-                                      VelocityFix, WheelSpeed, ZeroVelocity)
+                                      VelocityFix, WheelSpeed, ZeroRate,
+                                      ZeroVelocity)
 from selfnav.ins.policy import FixDecision, FixStatus, NavStatus, chi2_gate
 from selfnav.ins.startup import StartUp
 from selfnav.types import Trajectory
@@ -141,17 +142,28 @@ class NavigatorResult:
         return np.hypot(self.sigma_enu[:, 0], self.sigma_enu[:, 1])
 
 
-def _still(w_blk, f_blk, C_nb, veh):
+def _still(w_blk, f_blk, flt, veh, widen: bool = False):
     """ZUPT detector on one aiding block: small rates, steady |f|, no horizontal acceleration.
 
     An IMU cannot tell rest from constant velocity, so the caller also asks for a slow INS.
+    The rates and the levelled specific force are bias-corrected. ``widen``: what the filter
+    does not know of its biases and tilt (3σ) widens the bounds — a consumer part 1.4° off in
+    tilt and 0.5 °/s in yaw bias reads 0.14 m/s² and 0.6 °/s at rest. The zero angular-rate
+    update takes the widened test (a straight cruise taken for rest turns no more than a stop);
+    the zero-velocity update does not: at 0.5 m/s² of bound, a cruise at 5.6 m/s whose INS
+    speed a Gauss–Markov fix window had dragged under 1 m/s was clamped to rest.
     """
     if len(w_blk) < 3:
         return False
-    f_n = C_nb.T @ f_blk.mean(0)
-    return (np.max(np.linalg.norm(w_blk, axis=1)) < veh.zupt_gyro
+    f_n = flt.ins.C_nb.T @ f_blk.mean(0)
+    slack_w = slack_f = 0.0
+    if widen:
+        P = flt.P
+        slack_w = 3.0 * math.sqrt(max(P[9, 9], P[10, 10], P[11, 11]))
+        slack_f = 3.0 * math.sqrt(9.81**2 * max(P[6, 6], P[7, 7]) + max(P[12, 12], P[13, 13]))
+    return (np.max(np.linalg.norm(w_blk, axis=1)) < veh.zupt_gyro + slack_w
             and np.std(np.linalg.norm(f_blk, axis=1)) < veh.zupt_accel
-            and np.hypot(f_n[0], f_n[1]) < veh.zupt_accel_h)
+            and np.hypot(f_n[0], f_n[1]) < veh.zupt_accel_h + slack_f)
 
 
 def set_course_heading(flt, cov_v, sigma_course):
@@ -235,7 +247,7 @@ class Navigator:
     grade, lever_arm_m, nhc_lever_m, nhc, imu_time_offset_s, odometer, platform :
         As :func:`selfnav.ins.config.navigator_config`.
     road_aid : optional
-        A map aid (:class:`selfnav.roads.aid.EkfRoadAid`): ``start_check(imu, gnss, cfg)``,
+        A map aid (:class:`selfnav.roads.aid.EkfRoadAid`): ``start_check(imu, gnss, cfg, start=)``,
         ``add_fix(t, lat, lon, sigma)``, ``__call__(t, flt) -> measurement | None`` at every
         aiding epoch. :func:`selfnav.navigate` builds it from ``roads``.
     init : dict, optional
@@ -760,8 +772,9 @@ class Navigator:
         self._blk_w, self._blk_f = [], []
         v_max = max(veh.zupt_speed,
                     veh.zupt_speed_sigmas * float(np.sqrt(flt.P[3, 3] + flt.P[4, 4])))
-        self._still = bool(veh.zupt and np.linalg.norm(flt.ins.velocity_n) < v_max
-                           and _still(w_blk, f_blk, flt.ins.C_nb, veh))
+        slow = bool(veh.zupt and np.linalg.norm(flt.ins.velocity_n) < v_max)
+        self._still = slow and _still(w_blk, f_blk, flt, veh)
+        zaru = veh.zaru and (self._still or (slow and _still(w_blk, f_blk, flt, veh, widen=True)))
         self.bank.judged(self._still)
         if self.vib_reference is not None:
             kv = vibration_scale(vibration_level(w_blk, f_blk), self.vib_reference,
@@ -769,12 +782,15 @@ class Navigator:
             for f in self._filters() + [ref.flt for ref in self.bank.refs]:
                 f.vibration = kv
         for f in self._filters():
+            dx = np.zeros(f.nx)
+            if zaru:
+                dx = f.update(ZeroRate(w_blk + (flt.bg - f.bg), veh.zaru_sigma).model(f))
             if self._still:
-                dx = f.update(ZeroVelocity(veh.zupt_sigma).model(f))
+                dx = dx + f.update(ZeroVelocity(veh.zupt_sigma).model(f))
             elif veh.nhc:
-                dx = f.update(NonHolonomic(veh.nhc_sigma, veh.nhc_sigma_up
-                                           or veh.nhc_sigma).model(f))
-            else:
+                dx = dx + f.update(NonHolonomic(veh.nhc_sigma, veh.nhc_sigma_up
+                                                or veh.nhc_sigma).model(f))
+            elif not zaru:
                 continue
             if f is flt:
                 self._dx = self._dx + dx

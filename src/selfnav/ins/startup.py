@@ -54,8 +54,8 @@ class StartUp:
     time_offset_applied : float
         Added to the IMU stamps to get true time (the reader's and the user's offset), s.
     start_check : callable, optional
-        ``start_check(imu, gnss, cfg) -> dict`` replacing :func:`robust_init` (the map's
-        check; it must use only the data it is given).
+        ``start_check(imu, gnss, cfg, start=) -> dict | None``: the start (``start(imu,
+        gnss)``, this stage's own) checked by the map; it must use only the data it is given.
     max_buffer_s : float
         Seconds of data kept before the start (older samples are dropped).
     retry_s : float
@@ -148,17 +148,22 @@ class StartUp:
         # the IMU on the true time base for the start (stamps + the applied offset)
         imu_true = imu.shifted(self.offset)
         cfg, measured, notes = calibrate.calibrated_config(self.cfg, imu_true, gnss)
+
+        def start(imu_, gnss_):
+            if cfg.init.any_start == "now":
+                return any_start(imu_, gnss_, cfg, self.magnetometer)
+            try:
+                return robust_init(imu_, gnss_, cfg=cfg, require_healthy=True)
+            except SelfnavError as e:
+                # a platform that moves but never gives the car's straight fast run
+                init_, cfg_ = self._fallback(imu_, gnss_, cfg, e)
+                return dict(init_, start_cfg=cfg_)
+
         try:
-            if self.start_check is not None:
-                init = self.start_check(imu_true, gnss, cfg)
-            elif cfg.init.any_start == "now":
-                init = any_start(imu_true, gnss, cfg, self.magnetometer)
+            if self.start_check is not None:            # the same start, checked on the map
+                init = self.start_check(imu_true, gnss, cfg, start=start)
             else:
-                try:
-                    init = robust_init(imu_true, gnss, cfg=cfg, require_healthy=True)
-                except SelfnavError as e:
-                    # a platform that moves but never gives the car's straight fast run
-                    init, cfg = self._fallback(imu_true, gnss, cfg, e)
+                init = start(imu_true, gnss)
         except SelfnavError as e:
             self.last_error = str(e)
             return None
@@ -166,6 +171,7 @@ class StartUp:
             self.last_error = "no start on the map's roads yet"
             return None
         init = dict(init)
+        cfg = init.pop("start_cfg", cfg)
         if "gyro_bias" not in init and measured is not None and measured.gyro_bias is not None:
             # a stop in the buffer measured the gyro bias (the Earth rate in its σ); the start
             # in motion has not (its own look back is 30 s: drive_0708 crept for 18 s after

@@ -20,7 +20,8 @@ from selfnav.roads.particles import TWO_PI, MatcherConfig, RoadParticles, wrap
 
 
 def start_on_roads(imu, gnss, graph: RoadGraph, cfg=None, *, span=30.0, far_sigmas=2.0,
-                   max_far=0.15, sigma=10.0, complete: bool = False, give_up_s=120.0):
+                   max_far=0.15, sigma=10.0, complete: bool = False, give_up_s=120.0,
+                   start=None):
     """The navigator's start (:func:`selfnav.ins.align.robust_init`) checked against the map.
 
     ``robust_init`` waits for a run of fixes that look healthy by themselves; a receiver that
@@ -36,7 +37,14 @@ def start_on_roads(imu, gnss, graph: RoadGraph, cfg=None, *, span=30.0, far_sigm
     ``complete`` (the causal navigator's start-up): only a start whose whole span lies in the
     data and that follows a healthy run of fixes counts; None until there is one — or, when
     ``give_up_s`` have passed since the first candidate without one on the roads, the latest.
+    ``start(imu, gnss) -> init`` (raising :class:`SelfnavError` when there is none yet): the
+    start to check, default ``robust_init`` — the start-up passes its own, with the fallback
+    start of a platform that never gives the car's straight fast run (a car in a city centre:
+    without it, the map's check waited 300 s for one that the plain navigator did not need).
     """
+    if start is None:
+        def start(imu_, sub_):
+            return robust_init(imu_, sub_, cfg=cfg, require_healthy=complete)
     sig = np.asarray(gnss.sigma_m, float) if gnss.sigma_m is not None else \
         np.full(len(gnss.t), np.nan)
     sig = np.where(np.isfinite(sig), sig, sigma)
@@ -49,20 +57,30 @@ def start_on_roads(imu, gnss, graph: RoadGraph, cfg=None, *, span=30.0, far_sigm
         if len(sub) < 25:
             break
         try:
-            init = robust_init(imu, sub, cfg=cfg, require_healthy=complete)
+            init = start(imu, sub)
         except SelfnavError:
             if complete:
-                return None
+                break            # no later start yet: the give-up below still applies
             raise
         first = first or init
         t0 = float(init["t"])
-        if complete and gnss.t[-1] < t0 + span:
+        # the fixes from 10 s before the start to ``span`` after it — but not before its
+        # healthy run: fixes already judged unhealthy (an outlier window ending 1–10 s before)
+        # are not the start's to answer for. A start anywhere (``start_kind``) may be made on
+        # the newest fixes, so the span after it never completes: it answers for every fix
+        # from ``span`` before it to now, once they span ``span``
+        now_start = "start_kind" in init
+        t_check = max(t0 - (span if now_start else 10.0), float(init.get("t_healthy", -np.inf)))
+        t_end = float(gnss.t[-1]) if now_start else t0 + span
+        if complete and (t_end - t_check < span if now_start else gnss.t[-1] < t_end):
             break
         last = init
-        idx = np.flatnonzero((gnss.t >= t0 - 10.0) & (gnss.t <= t0 + span))
+        idx = np.flatnonzero((gnss.t >= t_check) & (gnss.t <= t_end))
         if len(idx) < 5 or np.mean(_off_roads(graph, gnss.t, xy, idx, far_sigmas * sig)) \
                 <= max_far:
             return init
+        if now_start:
+            break            # the next one is tried at the next attempt, on newer fixes
         t_from = t0 + span
     if complete:
         # fixes that never lie on the map's roads for this long (a car park, a map that
@@ -214,10 +232,10 @@ class EkfRoadAid:
         self.fix_xy.append((float(x), float(y)))
         self.sig.append(float(sigma) if np.isfinite(sigma) else self.pf.cfg.sigma_gnss)
 
-    def start_check(self, imu, gnss, cfg):
-        """The navigator's start, checked against the map (:func:`start_on_roads`, on the
-        data so far: None until the check's span is complete)."""
-        return start_on_roads(imu, gnss, self.g, cfg, complete=True)
+    def start_check(self, imu, gnss, cfg, start=None):
+        """The navigator's start (``start``, as :func:`start_on_roads` takes it), checked
+        against the map on the data so far: None until the check's span is complete."""
+        return start_on_roads(imu, gnss, self.g, cfg, complete=True, start=start)
 
     def on_start(self, t0, flt):
         """The navigator started at ``t0``."""
