@@ -111,6 +111,40 @@ def test_noise_scale_rises_on_overconfidence_and_never_falls_below_one():
     assert flt.q_scale == 1.0
 
 
+def test_a_window_of_large_innovations_reopens_the_covariance_once():
+    """The sums of the last 8, 16 and 32 trusted fixes' NIS are χ² tests of 16, 32 and 64
+    dimensions at p 10⁻⁴ shared: honest innovations (χ²₂ draws) reopen P about once in
+    25 000 fixes (sliding windows, correlated tests — at most 6 over 40 000 here); eight at
+    NIS 8 (4 per dimension) scale P by 4 once, and the window begins again."""
+    from selfnav.ins.config import NoiseAdaptation
+
+    def filt():
+        return InsGnssFilter(FilterConfig.for_grade("industrial"), 0.0, 0.9, 0.4, 10.0,
+                             np.zeros(3), np.eye(3))
+
+    false = 0
+    for seed in range(20):
+        ad = calibrate.NoiseAdapter(NoiseAdaptation(), 1e-4)
+        flt = filt()
+        for c in np.random.default_rng(seed).chisquare(2, 2000):
+            ad.on_fix(flt, float(c), 2)
+        false += ad.reopenings
+    assert false <= 6
+    flt = filt()
+    P0 = flt.P.copy()
+    ad = calibrate.NoiseAdapter(NoiseAdaptation(), 1e-4)
+    for c in np.random.default_rng(0).chisquare(2, 40):
+        ad.on_fix(flt, float(c), 2)
+    ad.window = []
+    for _ in range(8):
+        ad.on_fix(flt, 8.0, 2)
+    assert ad.reopenings == 1
+    np.testing.assert_allclose(flt.P, 4.0 * P0)
+    for _ in range(7):
+        ad.on_fix(flt, 8.0, 2)
+    assert ad.reopenings == 1
+
+
 def test_reference_ratio_follows_the_dead_reckoning_errors_and_settles():
     """The references' variance ratio κ̂ from their χ² (mean over a memory in time): honest
     ≈ 1; errors with 4× the predicted variance ≈ 4; λ then moves to the λ that makes the

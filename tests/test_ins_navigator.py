@@ -347,6 +347,33 @@ def test_references_take_a_zero_velocity_update_only_for_samples_judged_still():
     assert np.sqrt(bank.refs[0].flt.P[3, 3]) < 0.05          # judged still: ZUPT
 
 
+def test_the_bank_vouches_only_for_what_a_reference_witnessed():
+    """While an episode that no reference witnessed is open (the start, a restart or a
+    recovery under ``branch_after_s`` old), the horizontal covariance is the equal mixture's
+    about M: ``C + ½ d dᵀ``, ``d`` the latest fix's offset; witnessed, it is M's own."""
+    from selfnav.ins.hypotheses import Episode, FaultBank
+
+    f = _filter_at(np.eye(3))
+    bank = FaultBank(f.cfg)
+    C = np.diag([4.0, 9.0])
+    assert bank.doubt(C) is C                          # no episode
+    d = np.array([30.0, -40.0])
+    bank.episode = Episode(10.0, witnessed=True, offset=d)
+    assert bank.doubt(C) is C
+    bank.episode = Episode(10.0, witnessed=False, offset=d)
+    np.testing.assert_allclose(bank.doubt(C), C + 0.5 * np.outer(d, d))
+    # a reference old enough to judge stands: the episode it opens is witnessed
+    from selfnav.ins.hypotheses import Reference
+
+    bank.episode = None
+    bank.refs = [Reference(0.0, f.copy())]
+    bank._open(60.0, reset=False)
+    assert bank.episode.witnessed
+    bank.episode, bank.refs = None, []
+    bank._open(60.0, reset=False)
+    assert not bank.episode.witnessed
+
+
 def test_a_consumer_start_in_motion_fuses_the_rest_of_its_window():
     """A consumer IMU (1 °/s gyro biases, here 2.7 °/s on one axis) starting in motion from
     10 m fixes: the start holds a quarter of its window's information and the fixes after its
@@ -468,4 +495,44 @@ def test_the_map_checks_the_start_a_city_car_makes_without_a_straight_run():
     sol = selfnav.navigate(sim.imu, sim.gnss.as_gnss(), read_roads(sim.map_path))
     assert sol.stats["start_s"] < wins[0].end + 40.0, sol.stats["start_s"]
     _, r = _error_over_sigma(sol, sim.truth)
+    assert np.percentile(r, 95) <= 3.0 and np.mean(r > 5.0) <= 0.01
+
+
+def test_a_start_made_on_faulty_fixes_is_not_vouched_for():
+    """Simulated campaign drive 8226829303848017408 (master seed 7, consumer IMU): the first
+    119 s of fixes carry a Gauss–Markov error; the start anywhere is made at 104 s on them,
+    its heading hypotheses settle 170° off, and the bank rejects the fixes while M runs
+    700 m away at σ 170 m (r ≈ 6, 1.9 % of rows beyond 5σ) until the restart from the fixes
+    at 150 s. No reference stood behind M then: the bank's covariance is the equal mixture's
+    (:meth:`~selfnav.ins.hypotheses.FaultBank.doubt`), and σ covers the error."""
+    from selfnav.sim.scenarios import simulate
+
+    spec, sim_seed, wins = _campaign_drive(8226829303848017408)
+    assert spec["imu"]["grade"] == "consumer" and wins[0].kind == "gm"
+    sim = simulate(spec, seed=sim_seed)
+    sol = selfnav.navigate(sim.imu, sim.gnss.as_gnss())
+    assert sol.stats["start_s"] < wins[0].end
+    e, r = _error_over_sigma(sol, sim.truth)
+    assert e.max() > 300.0                       # the start was wrong …
+    assert np.percentile(r, 95) <= 3.0 and np.mean(r > 5.0) <= 0.01   # … and σ said so
+
+
+def test_a_covariance_the_fixes_contradict_is_reopened_and_witnesses_nothing():
+    """Simulated campaign drive 3528823705539987805 (master seed 2, consumer IMU, central
+    Helsinki with the map): a start at 2.8 m/s whose heading hypotheses collapse 41° off at
+    σ 4.5°. Its clean fixes were fused at NIS 5 on average for 30 s; a reference branched
+    from that state, a drag alarm reset the filter to it, and after a recovery it flagged the
+    clean fixes again: 220–340 m off at σ 15–27 m for 220 s (p95 of error/σ 17.9). The sum of
+    16 fixes' NIS now reopens P, the references branched from it are dropped, and the
+    health clock starts again."""
+    from selfnav.roads.graph import read_roads
+    from selfnav.sim.scenarios import simulate
+
+    spec, sim_seed, _ = _campaign_drive(3528823705539987805)
+    assert spec["imu"]["grade"] == "consumer"
+    sim = simulate(spec, seed=sim_seed)
+    sol = selfnav.navigate(sim.imu, sim.gnss.as_gnss(), read_roads(sim.map_path))
+    assert sol.stats["covariance_reopenings"] >= 1
+    e, r = _error_over_sigma(sol, sim.truth)
+    assert np.sqrt(np.mean(e**2)) < 15.0
     assert np.percentile(r, 95) <= 3.0 and np.mean(r > 5.0) <= 0.01

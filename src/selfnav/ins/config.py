@@ -366,6 +366,15 @@ class NoiseAdaptation:
     vibration : scale the process noise by the vibration the IMU feels, block by block, over
         the vibration at rest (:func:`selfnav.ins.calibrate.vibration_scale`)
     vibration_cap : the largest vibration factor
+    reopen_windows : numbers of trusted fixes whose normalised innovations, summed, test the
+        covariance itself: beyond the χ² gate of their ``2n`` dimensions (at
+        ``integrity.p_false_alarm`` shared among the windows) the filter knows its state
+        less well than it says (a start that left the tilt 5σ off) and ``P`` is scaled by
+        their mean per dimension — one fading-memory step, at once, where ``λ`` would take
+        minutes; the fault bank's health clock starts again. Only while no reference of
+        the bank stands (with references, growing innovations are theirs to judge: a drag's
+        first fixes reopened ``P`` and captured the filter) (() : never)
+    reopen_cap : the largest factor one reopening scales ``P`` by
     """
 
     hi: float = 1e3
@@ -379,6 +388,8 @@ class NoiseAdaptation:
     q_scale0: float = 1.0
     vibration: bool = True
     vibration_cap: float = 100.0
+    reopen_windows: tuple = (8, 16, 32)
+    reopen_cap: float = 25.0
 
 
 @dataclass

@@ -77,6 +77,9 @@ class Episode:
                                                 # were no car's track (white, Gauss–Markov)
     unwitnessed: bool = False                   # opened right after the (re)start, before
                                                 # any reference was branched
+    witnessed: bool = True                      # M stood on a reference when it opened (a
+                                                # mature one, or M was reset to one)
+    offset: np.ndarray | None = None            # the latest fix − M, ENU horizontal, m
 
     def to_dict(self) -> dict:
         return {"start_s": self.t_start, "end_s": self.t_end, "kind": self.kind,
@@ -152,6 +155,7 @@ class FaultBank:
         one, and none of its own exists yet."""
         self.refs = []
         self.t_started = float(t)
+        self.forget_innovations()
 
     def on_imu(self, t, dtheta, dv, dt):
         """IMU increments that moved ``M`` (stamps ``t``): the references follow once per
@@ -374,6 +378,7 @@ class FaultBank:
         ep.fixes += 1
         in_gate = nis <= self.gate
         fix = _RunFix(t, -m_pos.r[:2].copy(), float(np.sqrt(m_pos.R[0, 0])))
+        ep.offset = fix.offset
         if self._latlon is not None:
             if ep.origin is None:
                 ep.origin = self._latlon
@@ -716,14 +721,34 @@ class FaultBank:
                 shift = shift + float(dx[8]) * np.array([d[1], -d[0]])
             f.offset = f.offset + shift
 
-    def _open(self, t, reset, sep=0.0):
+    def covariance_reopened(self, t):
+        """``M``'s covariance was just shown too small by its trusted fixes' innovations
+        (:meth:`selfnav.ins.calibrate.NoiseAdapter.on_fix`, made only while no mature
+        reference stands): a young reference branched from it inherited that covariance and
+        is dropped, and the health clock starts again — the
+        next reference is branched only after ``branch_after_s`` of fixes fused with the
+        reopened covariance, and an episode opening before then is unwitnessed
+        (:meth:`doubt`). Kept, a reference branched from a start 41° off in heading at σ 4.5°
+        reset ``M`` to itself, 220 m off, for four minutes (simulated)."""
+        self.refs = []
+        self.t_healthy = float(t)
+
+    def forget_innovations(self):
+        """The recent innovations were another filter's (``M`` reset, restarted or replaced):
+        the drift test and the adapter's reopening window begin again."""
         self.innov = []
+        if self.adapter is not None:
+            self.adapter.window = []
+
+    def _open(self, t, reset, sep=0.0):
+        self.forget_innovations()
         self.episode = Episode(t, reset=reset, kind="drag" if reset else "outliers",
                                max_separation_m=sep,
                                unwitnessed=(self.t_started is not None
                                             and self._t_branch < self.t_started
                                             and t - self.t_started
-                                            <= self.cfg.integrity.branch_after_s))
+                                            <= self.cfg.integrity.branch_after_s),
+                               witnessed=reset or bool(self.mature(t)))
         self.run = []
         self.streak = 0
         self.used_streak = 0
@@ -765,6 +790,20 @@ class FaultBank:
         self.episode = self.outage = None
 
     # ------------------------------------------------------------------ integrity
+    def doubt(self, C_h) -> np.ndarray:
+        """The horizontal output covariance ``C_h`` (2×2, ENU) of ``M`` as the bank can vouch
+        for it. While an episode that no reference witnessed is open — nothing but the fixes
+        now doubted stood behind ``M`` when it opened: a start, a restart, a recovery, each
+        under ``branch_after_s`` old — the bank's verdict on the fixes rests only on ``M``'s
+        own covariance, the very thing in question (simulated consumer starts 5σ off in tilt
+        or 40° in heading rejected clean fixes for minutes, σ 15 m at 300 m of error). The
+        two sides are then equally likely: the covariance is the mixture's about ``M``,
+        ``C_h + ½ d dᵀ``, ``d`` the latest fix's offset from ``M``."""
+        ep = self.episode
+        if ep is None or ep.witnessed or ep.offset is None:
+            return C_h
+        return C_h + 0.5 * np.outer(ep.offset, ep.offset)
+
     def protection_level(self, flt, t, P_out=None) -> float:
         """Horizontal protection level at the configured integrity risk, m: ``M``'s own bound
         (of the reported point, ``P_out``: :func:`selfnav.ins.ekf.output_covariance`), and —

@@ -585,7 +585,7 @@ class Navigator:
         flt.track_transition = self.smoother
         flt.q_scale = cfg.adaptation.q_scale0
         self.flt = flt
-        self.adapter = NoiseAdapter(cfg.adaptation) if cfg.imu.adapt else None
+        self.adapter = NoiseAdapter(cfg.adaptation, cfg.integrity.p_false_alarm) if cfg.imu.adapt else None
         # the vibration at rest, or the white noise the model assumes, is the reference
         dt_imu = float(np.median(np.diff(st.imu().t))) if st.imu_t else 0.01
         ms = start.measured
@@ -1000,8 +1000,10 @@ class Navigator:
                     reason = ((reason + "; " if reason else "")
                               + f"height rejected (NIS {nis_v:.3g})")
             self._t_last_fused = fx.t
-            if self.adapter is not None and self.bank.episode is None:
-                self.adapter.on_fix(flt, v.nis, 2)
+            if self.adapter is not None and self.bank.episode is None \
+                    and self.adapter.on_fix(flt, v.nis, 2,
+                                            may_reopen=not self.bank.mature(fx.t)):
+                self.bank.covariance_reopened(fx.t)
             if self.road_aid is not None:
                 # the map's cloud takes the fixes the navigator takes, as it takes them (a
                 # fault's fixes fed to it led it to other roads, and the filter after it)
@@ -1055,7 +1057,7 @@ class Navigator:
         if self.flt is not m_old:
             # M is another hypothesis now: its innovations so far were another filter's, and
             # the smoother's record breaks here
-            self.bank.innov = []
+            self.bank.forget_innovations()
             self._reset_flag = True
         nis, used, nis_v, nis_vel = info[id(self.flt)]
         if used:
@@ -1079,7 +1081,7 @@ class Navigator:
         self.flt = hyp.collapse()
         self._hyp = None
         self._reset_flag = True
-        self.bank.innov = []
+        self.bank.forget_innovations()
         if self.bank.t_healthy is not None:
             self.bank.t_healthy = max(self.bank.t_healthy, float(t))
 
@@ -1194,12 +1196,23 @@ class Navigator:
             C_out = output_covariance(P, flt.layout, C_nb, vel, flt.lever_b)
         else:      # the whole Gaussian sum about its mean
             C_out = self._hyp.output_covariance()
+        C_out = self._vouched(C_out)
         sig[IR] = np.sqrt(np.maximum(np.diag(C_out), 0.0))
         self._rows.append((T, dt_row, st, sig,
                            _STATUS_CODE[self._status(T)],
                            self.bank.protection_level(flt, T, C_out[:2, :2]),
                            len(self._rec["t"]) - 1 if self.smoother else -1,
                            len(self._segments), flt.layout.lever is not None))
+
+    def _vouched(self, C_out):
+        """The output covariance with the horizontal block the fault bank can vouch for
+        (:meth:`~selfnav.ins.hypotheses.FaultBank.doubt`)."""
+        C_h = self.bank.doubt(C_out[:2, :2])
+        if C_h is C_out[:2, :2]:
+            return C_out
+        C_out = C_out.copy()
+        C_out[:2, :2] = C_h
+        return C_out
 
     def _record_epoch(self):
         if not self.smoother:
@@ -1237,6 +1250,7 @@ class Navigator:
             C_out = output_covariance(flt.P, flt.layout, C_nb, flt.ins.velocity_n, flt.lever_b)
         else:
             C_out = self._hyp.output_covariance()
+        C_out = self._vouched(C_out)
         s = np.sqrt(np.maximum(C_out.diagonal(), 0.0))
         t = flt.t_true
         return NavState(t, math.degrees(float(lat)), math.degrees(float(lon)), float(h),
@@ -1365,6 +1379,7 @@ class Navigator:
                 "lever_arm_m": [float(x) for x in flt.lever_b],
                 "position_of": "antenna" if flt.layout.lever is not None else "imu",
                 "noise_scale": float(flt.q_scale),
+                "covariance_reopenings": 0 if self.adapter is None else self.adapter.reopenings,
                 "states": int(flt.nx)})
             if flt.layout.tdrift is not None:
                 j = flt.layout.tdrift.start
