@@ -135,7 +135,7 @@ def test_a_window_of_large_innovations_reopens_the_covariance_once():
     ad = calibrate.NoiseAdapter(NoiseAdaptation(), 1e-4)
     for c in np.random.default_rng(0).chisquare(2, 40):
         ad.on_fix(flt, float(c), 2)
-    ad.window = []
+    ad.forget()
     for _ in range(8):
         ad.on_fix(flt, 8.0, 2)
     assert ad.reopenings == 1

@@ -358,9 +358,9 @@ def test_the_bank_vouches_only_for_what_a_reference_witnessed():
     C = np.diag([4.0, 9.0])
     assert bank.doubt(C) is C                          # no episode
     d = np.array([30.0, -40.0])
-    bank.episode = Episode(10.0, witnessed=True, offset=d)
+    bank.episode = Episode(10.0, on_reference=True, offset=d)
     assert bank.doubt(C) is C
-    bank.episode = Episode(10.0, witnessed=False, offset=d)
+    bank.episode = Episode(10.0, on_reference=False, offset=d)
     np.testing.assert_allclose(bank.doubt(C), C + 0.5 * np.outer(d, d))
     # a reference old enough to judge stands: the episode it opens is witnessed
     from selfnav.ins.hypotheses import Reference
@@ -368,10 +368,10 @@ def test_the_bank_vouches_only_for_what_a_reference_witnessed():
     bank.episode = None
     bank.refs = [Reference(0.0, f.copy())]
     bank._open(60.0, reset=False)
-    assert bank.episode.witnessed
+    assert bank.episode.on_reference
     bank.episode, bank.refs = None, []
     bank._open(60.0, reset=False)
-    assert not bank.episode.witnessed
+    assert not bank.episode.on_reference
 
 
 def test_a_consumer_start_in_motion_fuses_the_rest_of_its_window():

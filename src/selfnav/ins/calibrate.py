@@ -476,14 +476,14 @@ class NoiseAdapter:
         c = self.cfg
         reopened = False
         if not may_reopen:
-            self.window = []
+            self.forget()
         elif self.reopen_gates and dof == 2:
             self.window = (self.window + [float(nis_value)])[-max(self.reopen_gates):]
             for n, gate in self.reopen_gates.items():
                 total = sum(self.window[-n:])
                 if len(self.window) >= n and total > gate:
                     flt.P *= min(total / (2 * n), c.reopen_cap)
-                    self.window = []
+                    self.forget()
                     self.reopenings += 1
                     reopened = True
                     break
@@ -497,6 +497,11 @@ class NoiseAdapter:
             flt.q_scale = new
             self.updates += 1
         return reopened
+
+    def forget(self):
+        """The reopening test's window begins again (its innovations were another
+        filter's, or ``P`` was just reopened)."""
+        self.window = []
 
     def on_reference(self, t, chi2_value, age, q_scale=1.0):
         """A trusted fix at time ``t`` against a mature reference of ``age`` s (2 dof) that was

@@ -77,7 +77,7 @@ class Episode:
                                                 # were no car's track (white, Gauss–Markov)
     unwitnessed: bool = False                   # opened right after the (re)start, before
                                                 # any reference was branched
-    witnessed: bool = True                      # M stood on a reference when it opened (a
+    on_reference: bool = True                   # M stood on a reference when it opened (a
                                                 # mature one, or M was reset to one)
     offset: np.ndarray | None = None            # the latest fix − M, ENU horizontal, m
 
@@ -738,7 +738,7 @@ class FaultBank:
         the drift test and the adapter's reopening window begin again."""
         self.innov = []
         if self.adapter is not None:
-            self.adapter.window = []
+            self.adapter.forget()
 
     def _open(self, t, reset, sep=0.0):
         self.forget_innovations()
@@ -748,7 +748,7 @@ class FaultBank:
                                             and self._t_branch < self.t_started
                                             and t - self.t_started
                                             <= self.cfg.integrity.branch_after_s),
-                               witnessed=reset or bool(self.mature(t)))
+                               on_reference=reset or bool(self.mature(t)))
         self.run = []
         self.streak = 0
         self.used_streak = 0
@@ -800,7 +800,7 @@ class FaultBank:
         two sides are then equally likely: the covariance is the mixture's about ``M``,
         ``C_h + ½ d dᵀ``, ``d`` the latest fix's offset from ``M``."""
         ep = self.episode
-        if ep is None or ep.witnessed or ep.offset is None:
+        if ep is None or ep.on_reference or ep.offset is None:
             return C_h
         return C_h + 0.5 * np.outer(ep.offset, ep.offset)
 

@@ -158,9 +158,10 @@ def _still(w_blk, f_blk, flt, veh, widen: bool = False):
     f_n = flt.ins.C_nb.T @ f_blk.mean(0)
     slack_w = slack_f = 0.0
     if widen:
-        P = flt.P
-        slack_w = 3.0 * math.sqrt(max(P[9, 9], P[10, 10], P[11, 11]))
-        slack_f = 3.0 * math.sqrt(9.81**2 * max(P[6, 6], P[7, 7]) + max(P[12, 12], P[13, 13]))
+        d = flt.P.diagonal()
+        slack_w = 3.0 * math.sqrt(max(d[IBG]))
+        # the tilt (the attitude's first two) and the horizontal accelerometer biases
+        slack_f = 3.0 * math.sqrt(9.81**2 * max(d[IP][:2]) + max(d[IBA][:2]))
     return (np.max(np.linalg.norm(w_blk, axis=1)) < veh.zupt_gyro + slack_w
             and np.std(np.linalg.norm(f_blk, axis=1)) < veh.zupt_accel
             and np.hypot(f_n[0], f_n[1]) < veh.zupt_accel_h + slack_f)
@@ -1207,8 +1208,9 @@ class Navigator:
     def _vouched(self, C_out):
         """The output covariance with the horizontal block the fault bank can vouch for
         (:meth:`~selfnav.ins.hypotheses.FaultBank.doubt`)."""
-        C_h = self.bank.doubt(C_out[:2, :2])
-        if C_h is C_out[:2, :2]:
+        C_m = C_out[:2, :2]
+        C_h = self.bank.doubt(C_m)
+        if C_h is C_m:
             return C_out
         C_out = C_out.copy()
         C_out[:2, :2] = C_h
