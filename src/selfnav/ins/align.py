@@ -47,6 +47,7 @@ from selfnav.errors import SelfnavError
 from selfnav.latitude import estimate_latitude, gyro_attitude
 from selfnav.ins.strapdown import integrate_imu
 from selfnav.ins.config import FilterConfig, chi2_999
+from selfnav.units import wrap_pi
 from selfnav.types import GnssData
 
 
@@ -431,6 +432,9 @@ def levelling_map(C_bn):
     return G @ np.asarray(C_bn, dtype=float)
 
 
+#: σ of a tilt levelled on the mean specific force of a straight constant-speed window, rad
+WINDOW_TILT_SIGMA = np.radians(4.0)
+
 #: seconds of one stop agree on the direction of the specific force to this, rad
 STOP_TILT_AGREE = np.radians(0.2)
 
@@ -525,8 +529,9 @@ def init_from_gnss(imu, gnss: GnssData, cfg: FilterConfig, sig_h):
     2. Roll and pitch: levelled in the last still second before (GNSS confirms it is still),
        carried to the start by the gyros; the still period also gives the gyro biases (mean
        rate less the vertical Earth rate; the horizontal Earth rate is left in their σ).
-       Without a still period: levelled from the mean specific force over the straight,
-       constant-speed window.
+       Without a still period, or where its tilt and the window's disagree by more than the
+       window's σ (``WINDOW_TILT_SIGMA``: the "still" second was the first of a pull-away):
+       levelled from the mean specific force over the straight, constant-speed window.
     """
     n = len(gnss.t)
     dtf = float(np.median(np.diff(gnss.t))) if n > 1 else 1.0
@@ -565,9 +570,24 @@ def init_from_gnss(imu, gnss: GnssData, cfg: FilterConfig, sig_h):
         # are not independent of it) — it starts taking fixes after ``t_used``
         out = dict(t=t0, lat=lat, lon=lon, h=coef[0, 2], velocity_n=v0,
                    t_used=float(gnss.t[sl][-1]), fix_share=START_FIX_SHARE)
+        # straight and at constant speed: the specific force is gravity alone
+        jw = np.searchsorted(imu.t, gnss.t[sl])
+        f_w = imu.f_ib_b[jw[0]:jw[-1] + 1].mean(0)
+        roll = np.arctan2(-f_w[0], f_w[2])
+        pitch = np.arctan2(f_w[1], np.hypot(f_w[0], f_w[2]))
+        s_tilt = WINDOW_TILT_SIGMA
+        C_bn0 = att.dcm_nb_from_euler(roll, pitch, np.arctan2(v0[0], v0[1])).T
         still = _still_before(imu, t0, gnss, float(normal_gravity(lat, coef[0, 2])),
                               accel_bias=cfg.imu.accel_bias_sigma)
         if still is not None:
+            # levelled in the still second, carried to the start by the gyros — unless that
+            # tilt and the window's disagree by more than twice the window's σ (a still
+            # second's own σ, 8–14° on 10 m fixes, is a bound it rarely comes near; the
+            # window's mean was 4° off on a start whose still second was right): the last "still"
+            # second before a start is often the first of the pull-away (a gentle
+            # acceleration passes every test, and 10 m fixes over it bound nothing; levelled
+            # there, simulated drive 3167802586923348212 started 8.9° off at σ 14°, outside
+            # the filter's linear range, and was 300 m off after a 47 s outage)
             j0, a_bound = still
             js, je = j0, j0 + int(round(1.0 / imu.dt))
             f_lev = imu.f_ib_b[js:je].mean(0)
@@ -580,27 +600,21 @@ def init_from_gnss(imu, gnss: GnssData, cfg: FilterConfig, sig_h):
             bg = w_mean - up_b * OMEGA_EARTH * np.sin(lat)
             sbg = np.sqrt(np.var(imu.omega_ib_b[js:je], axis=0) / (je - js)
                           + (OMEGA_EARTH * np.cos(lat)) ** 2 + cfg.imu.gyro_bias_instability**2)
-            out["gyro_bias"], out["gyro_bias_sigma"] = bg, sbg
             j1 = np.searchsorted(imu.t, t0)
             dts = np.diff(imu.t[je - 1:j1 + 1], prepend=imu.t[je - 1] - imu.dt)
             q = gyro_attitude(np.ascontiguousarray(imu.omega_ib_b[je - 1:j1 + 1] - bg), dts)
-            C_bn = C0.T @ att.quat_to_dcm(q[-1])
-            roll, pitch, _ = att.euler_from_dcm_bn(C_bn)
-            dur = imu.t[j1] - imu.t[je - 1]
-            s_tilt = np.radians(0.3) + np.arctan(a_bound / 9.8) + float(np.max(sbg)) * dur
-            # the attitude at levelling, in the true navigation frame: the start attitude
-            # rotated back by the gyros' rotation since (the body rotation is frame-free)
-            C_bn0 = att.dcm_nb_from_euler(roll, pitch, np.arctan2(v0[0], v0[1])).T
-            out["tilt_bias_map"] = levelling_map(C_bn0 @ att.quat_to_dcm(q[-1]).T)
-        else:
-            # straight and at constant speed: the specific force is gravity alone
-            j = np.searchsorted(imu.t, gnss.t[sl])
-            f_b = imu.f_ib_b[j[0]:j[-1] + 1].mean(0)
-            roll = np.arctan2(-f_b[0], f_b[2])
-            pitch = np.arctan2(f_b[1], np.hypot(f_b[0], f_b[2]))
-            s_tilt = np.radians(4.0)
-            out["tilt_bias_map"] = levelling_map(
-                att.dcm_nb_from_euler(roll, pitch, np.arctan2(v0[0], v0[1])).T)
+            roll_s, pitch_s, _ = att.euler_from_dcm_bn(C0.T @ att.quat_to_dcm(q[-1]))
+            if np.hypot(wrap_pi(roll_s - roll), pitch_s - pitch) <= 2.0 * WINDOW_TILT_SIGMA:
+                roll, pitch = roll_s, pitch_s
+                out["gyro_bias"], out["gyro_bias_sigma"] = bg, sbg
+                dur = imu.t[j1] - imu.t[je - 1]
+                s_tilt = np.radians(0.3) + np.arctan(a_bound / 9.8) + float(np.max(sbg)) * dur
+                # the attitude at levelling, in the true navigation frame: the start
+                # attitude rotated back by the gyros' rotation since (the body rotation is
+                # frame-free)
+                C_bn0 = (att.dcm_nb_from_euler(roll, pitch, np.arctan2(v0[0], v0[1])).T
+                         @ att.quat_to_dcm(q[-1]).T)
+        out["tilt_bias_map"] = levelling_map(C_bn0)
         s_hdg = np.arctan2(sv, speed) + np.radians(2.0)
         # the acceleration at the start: the start's velocity carries the IMU time offset's
         # error through it (navigator.set_stamp_time)

@@ -157,6 +157,19 @@ class HeadingHypotheses:
         self.spawned = len(self.filters)
         self._normalise()
 
+    def join(self, f, weight: float, delta: float):
+        """One more hypothesis ``f`` beside the sum, holding ``weight`` of the whole (the
+        others scaled to the rest); ``delta`` its heading offset, rad, for the reports."""
+        f.track_transition = self.filters[0].track_transition
+        f.q_scale, f.bias_scale = self.filters[0].q_scale, self.filters[0].bias_scale
+        self.filters.append(f)
+        self.acc.append([0.0, np.zeros(3), np.zeros(3)])
+        self.logw = np.append(self.logw + math.log1p(-weight), math.log(weight))
+        self.deltas = np.append(self.deltas, delta)
+        self.bias_deltas = np.append(self.bias_deltas, 0.0)
+        self.spawned += 1
+        self._normalise()
+
     # ------------------------------------------------------------------ bookkeeping
     def _normalise(self):
         self.logw = self.logw - np.max(self.logw)
@@ -329,17 +342,24 @@ def split_heading(flt, cfg):
     wide_b = ini.yaw_bias_split_sigma is not None and s_b > 1.5 * ini.yaw_bias_split_sigma
     if s <= 1.5 * ini.heading_split_sigma and not wide_b:
         return None
+    return heading_hypotheses(flt, cfg)
+
+
+def heading_hypotheses(flt, cfg, *, split: bool = True):
+    """:class:`HeadingHypotheses` for ``flt`` as configured; ``split=False``: ``flt`` alone,
+    the first of a sum :meth:`HeadingHypotheses.join` adds others to."""
     from selfnav.ins.policy import chi2_gate
 
-    return HeadingHypotheses(flt, split_sigma=ini.heading_split_sigma,
-                             max_hypotheses=ini.heading_split_max,
+    ini = cfg.init
+    return HeadingHypotheses(flt, split_sigma=ini.heading_split_sigma or math.pi,
+                             max_hypotheses=ini.heading_split_max if split else 1,
                              prune_ratio=ini.heading_prune_ratio,
                              resolved_weight=ini.heading_resolved_weight,
                              max_s=ini.heading_resolve_max_s,
                              gate=chi2_gate(2, cfg.integrity.p_false_alarm),
-                             bias_split_sigma=ini.yaw_bias_split_sigma,
+                             bias_split_sigma=ini.yaw_bias_split_sigma if split else None,
                              bias_split_max=ini.yaw_bias_split_max)
 
 
-__all__ = ["HeadingHypotheses", "split_heading", "state_difference"]
+__all__ = ["HeadingHypotheses", "heading_hypotheses", "split_heading", "state_difference"]
 

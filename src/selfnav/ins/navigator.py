@@ -43,7 +43,7 @@ from selfnav.ins.calibrate import NoiseAdapter, vibration_level, vibration_scale
 from selfnav.ins.config import FilterConfig
 from selfnav.ins.ekf import (IBA, IBG, IP, IR, IV, PACK, PACK_SIZE, InsGnssFilter, apply_error,
                              output_covariance, pack_state, rts_smooth)
-from selfnav.ins.headings import split_heading
+from selfnav.ins.headings import heading_hypotheses, split_heading
 from selfnav.ins.hypotheses import FaultBank
 from selfnav.ins.measurements import (Heading, NonHolonomic, PositionFix, RunVelocity,
                                       VelocityFix, WheelSpeed, ZeroRate,
@@ -1109,8 +1109,15 @@ class Navigator:
         lead = flt.t_true - track[-1].t
         lat, lon, _ = offset_to_geodetic(float(lat), float(lon), 0.0,
                                          np.array([v[0] * lead, v[1] * lead, 0.0]))
-        roll, pitch, _ = att.euler_from_dcm_nb(flt.ins.C_nb)
+        roll, pitch, hdg_ins = att.euler_from_dcm_nb(flt.ins.C_nb)
         hdg = float(np.arctan2(v[0], v[1]))
+        # the other side: only the position was lost (velocity, attitude and sensor
+        # estimates as the INS has them)
+        kept = flt.copy()
+        kept.ins.set_state(lat=float(lat), lon=float(lon), h=float(fx.h))
+        kept.P[IR, :] = 0.0
+        kept.P[:, IR] = 0.0
+        kept.P[IR, IR] = np.diag([s_p**2 * 4, s_p**2 * 4, fx.sigma_v**2])
         flt.ins.set_state(lat=float(lat), lon=float(lon), h=float(fx.h),
                           velocity_n=np.array([v[0], v[1], 0.0]),
                           C_nb=att.dcm_nb_from_euler(roll, pitch, hdg))
@@ -1128,8 +1135,16 @@ class Navigator:
         self._reset_flag = True
         self._t_last_fused = fx.t
         self.counts["reinitialisations"] += 1
-        # a course from noisy fixes: a heading outside the filter's range is split again
-        self._hyp = split_heading(flt, cfg)
+        # a course from noisy fixes: a heading outside the filter's range is split again;
+        # beside it, the INS's own heading and velocity — a course fitted through a stop is
+        # reversed, and its σ does not know (simulated drive 4462764194648164540: 105° off
+        # at σ 3°, then 300 s of dead reckoning 500–800 m off, issue 18) — at equal odds:
+        # the fixes that follow weigh the two
+        hyp = split_heading(flt, cfg)
+        if cfg.init.heading_split_sigma is not None:
+            hyp = hyp or heading_hypotheses(flt, cfg, split=False)
+            hyp.join(kept, 0.5, (hdg_ins - hdg + math.pi) % (2.0 * math.pi) - math.pi)
+        self._hyp = hyp
         if self._hyp is not None:
             self.flt = self._hyp.filters[self._hyp.best]
 

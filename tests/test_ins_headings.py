@@ -1,0 +1,46 @@
+"""The Gaussian sum over the heading (selfnav.ins.headings): a sum built from one filter and
+joined by another — a restart from the fixes beside the INS's own heading — and its
+collapse, moment-matched about the best."""
+import math
+
+import numpy as np
+import pytest
+
+from selfnav import attitude as att
+from selfnav.earth import enu_offset
+from selfnav.ins import config as ic
+from selfnav.ins.headings import heading_hypotheses, split_heading
+from selfnav.ins.navigator import initial_filter
+
+
+def _filter():
+    cfg = ic.navigator_config()
+    init = {"t": 0.0, "lat": math.radians(60.0), "lon": math.radians(25.0), "h": 10.0,
+            "velocity_n": np.array([0.0, 8.0, 0.0]), "C_nb": att.dcm_nb_from_euler(0.0, 0.0, 0.0),
+            "sigmas": ([3.0, 3.0, 5.0], [0.3, 0.3, 0.3],
+                       [math.radians(0.5), math.radians(0.5), math.radians(2.0)])}
+    return cfg, initial_filter(cfg, init)
+
+
+@pytest.mark.parametrize("weight", [0.5, 0.2])
+def test_a_joined_hypothesis_holds_its_weight_and_the_collapse_covers_both(weight):
+    """One filter within the linear range (not split) joined by a second 10° and 12 m away
+    holding ``weight``: the sum's weights are ``1 − weight, weight``; collapsed about the
+    first (the best), its covariance is ``P + w d dᵀ`` with ``d`` the error-state difference
+    (heading to first order: ``sin δ``)."""
+    cfg, f = _filter()
+    assert split_heading(f, cfg) is None               # within the linear range: one
+    hyp = heading_hypotheses(f, cfg, split=False)
+    assert len(hyp.filters) == 1 and np.allclose(hyp.filters[0].P, f.P)
+    other = f.copy()
+    d = math.radians(10.0)
+    other.ins.set_state(C_nb=att.dcm_nb_from_euler(0.0, 0.0, d),
+                        lat=f.ins.lat + 12.0 / 6.36e6)
+    hyp.join(other, weight, d)
+    assert np.allclose(hyp.weights, [1.0 - weight, weight])
+    assert hyp.best == 0 and len(hyp.filters) == 2 and hyp.spawned == 2
+    P = hyp.collapse().P
+    assert P[8, 8] == pytest.approx(f.P[8, 8] + weight * math.sin(d) ** 2, rel=1e-6)
+    north = enu_offset(f.ins.lat, f.ins.lon, f.ins.h, other.ins.lat, other.ins.lon, f.ins.h)[1]
+    assert north == pytest.approx(12.0, rel=0.01)
+    assert P[1, 1] == pytest.approx(f.P[1, 1] + weight * north**2, rel=1e-6)
