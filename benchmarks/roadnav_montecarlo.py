@@ -51,17 +51,23 @@ def to_toml(spec: dict) -> str:
     return "\n".join(out)
 
 
-def replay(seed: int, odometer: bool, folder: Path) -> None:
-    params = {**campaigns.ROADNAV_DEFAULTS, "odometer": int(odometer)}
+def replay(seed: int, params: dict, folder: Path) -> None:
+    """The scenario of run ``seed`` of a campaign with ``params`` (the same ``--param`` as the
+    campaign: the grade, the windows' kinds and the map's use draw the drive) and the commands
+    that replay it."""
+    params = {**campaigns.ROADNAV_DEFAULTS, **params}
     spec, sim_seed, _ = campaigns.roadnav_scenario(seed, params)
     folder.mkdir(parents=True, exist_ok=True)
     scen = folder / f"roadnav_{seed}.toml"
     scen.write_text(f"# selfnav roadnav drive, run seed {seed} (simulated)\n" + to_toml(spec))
     m = spec["scenario"]["map"]
     d = folder / "sim"
-    odo = f" --odometer {d}/odometer.csv" if odometer else ""
+    odo = f" --odometer {d}/odometer.csv" if params["odometer"] else ""
+    map_aid = int(params["map_aid"])
+    use_map = map_aid > 0 or (map_aid < 0 and seed % 2 == 1)     # campaigns.run_roadnav
+    roads = f" --map {d}/{m}.osm.pbf" if use_map else ""
     print(f"selfnav simulate {scen} --seed {sim_seed} --out {d}")
-    print(f"selfnav navigate --imu {d}/imu.csv --gnss {d}/gnss.csv --map {d}/{m}.osm.pbf"
+    print(f"selfnav navigate --imu {d}/imu.csv --gnss {d}/gnss.csv{roads}"
           f"{odo} --out {folder}/sol.csv")
     print(f"selfnav evaluate --truth {d}/truth.csv --solution {folder}/sol.csv "
           f"--map {d}/{m}.osm.pbf --json")
@@ -94,15 +100,15 @@ def main() -> None:
                     help="a campaign parameter (selfnav.campaigns.ROADNAV_DEFAULTS), e.g. "
                          "map_aid=0, grade=mixed, kinds=white,gm,outage")
     a = ap.parse_args()
-    if a.replay is not None:
-        replay(a.replay, a.odometer, a.write)
-        return
-    load0 = os.getloadavg()
-    t0 = time.perf_counter()
     params = {"odometer": int(a.odometer)}
     for p in a.param:
         k, _, v = p.partition("=")
         params[k] = type(campaigns.ROADNAV_DEFAULTS[k])(v)
+    if a.replay is not None:
+        replay(a.replay, params, a.write)
+        return
+    load0 = os.getloadavg()
+    t0 = time.perf_counter()
     r = run_montecarlo("roadnav", a.runs, seed=a.seed, params=params,
                        workers=a.workers, chunk_size=1)
     wall = time.perf_counter() - t0
