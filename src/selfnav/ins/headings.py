@@ -351,7 +351,7 @@ def heading_hypotheses(flt, cfg, *, split: bool = True):
     from selfnav.ins.policy import chi2_gate
 
     ini = cfg.init
-    return HeadingHypotheses(flt, split_sigma=ini.heading_split_sigma or math.pi,
+    return HeadingHypotheses(flt, split_sigma=ini.heading_split_sigma,
                              max_hypotheses=ini.heading_split_max if split else 1,
                              prune_ratio=ini.heading_prune_ratio,
                              resolved_weight=ini.heading_resolved_weight,

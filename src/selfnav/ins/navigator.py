@@ -51,7 +51,7 @@ from selfnav.ins.measurements import (Heading, NonHolonomic, PositionFix, RunVel
 from selfnav.ins.policy import FixDecision, FixStatus, NavStatus, chi2_gate
 from selfnav.ins.startup import StartUp
 from selfnav.types import Trajectory
-from selfnav.units import G0
+from selfnav.units import G0, wrap_pi
 
 #: rows per second of the output (``--out-rate``): a car's 10 Hz
 DEFAULT_OUT_RATE_HZ = 10.0
@@ -1111,21 +1111,19 @@ class Navigator:
                                          np.array([v[0] * lead, v[1] * lead, 0.0]))
         roll, pitch, hdg_ins = att.euler_from_dcm_nb(flt.ins.C_nb)
         hdg = float(np.arctan2(v[0], v[1]))
+        Pm = flt.P
+        flt.ins.set_state(lat=float(lat), lon=float(lon), h=float(fx.h))
+        Pm[IR, :] = 0.0
+        Pm[:, IR] = 0.0
+        Pm[IR, IR] = np.diag([s_p**2 * 4, s_p**2 * 4, fx.sigma_v**2])
         # the other side: only the position was lost (velocity, attitude and sensor
         # estimates as the INS has them)
         kept = flt.copy()
-        kept.ins.set_state(lat=float(lat), lon=float(lon), h=float(fx.h))
-        kept.P[IR, :] = 0.0
-        kept.P[:, IR] = 0.0
-        kept.P[IR, IR] = np.diag([s_p**2 * 4, s_p**2 * 4, fx.sigma_v**2])
-        flt.ins.set_state(lat=float(lat), lon=float(lon), h=float(fx.h),
-                          velocity_n=np.array([v[0], v[1], 0.0]),
+        flt.ins.set_state(velocity_n=np.array([v[0], v[1], 0.0]),
                           C_nb=att.dcm_nb_from_euler(roll, pitch, hdg))
-        Pm = flt.P
-        for sl in (IR, IV, IP):
+        for sl in (IV, IP):
             Pm[sl, :] = 0.0
             Pm[:, sl] = 0.0
-        Pm[IR, IR] = np.diag([s_p**2 * 4, s_p**2 * 4, fx.sigma_v**2])
         Pm[IV, IV] = np.diag([(2 * s_v) ** 2, (2 * s_v) ** 2, 1.0])
         att_s = cfg.init.att_sigma
         Pm[IP, IP] = np.diag([att_s[0] ** 2, att_s[1] ** 2, att_s[2] ** 2])
@@ -1143,7 +1141,7 @@ class Navigator:
         hyp = split_heading(flt, cfg)
         if cfg.init.heading_split_sigma is not None:
             hyp = hyp or heading_hypotheses(flt, cfg, split=False)
-            hyp.join(kept, 0.5, (hdg_ins - hdg + math.pi) % (2.0 * math.pi) - math.pi)
+            hyp.join(kept, 0.5, float(wrap_pi(hdg_ins - hdg)))
         self._hyp = hyp
         if self._hyp is not None:
             self.flt = self._hyp.filters[self._hyp.best]
