@@ -299,7 +299,12 @@ class VehicleConstraints:
     zupt : zero-velocity updates while the IMU is still
     zupt_sigma : m/s
     zupt_speed : the INS speed must be below this, m/s …
-    zupt_speed_sigmas : … or below this many velocity σ (0: off)
+    zupt_speed_sigmas : … or, in a still run entered from braking, below this many velocity σ
+        (0: off; a car's: 2) …
+    zupt_speed_cap : … and below this, m/s (a constant cruise is still to an IMU: a 5.7 m/s
+        cruise whose INS speed sat within 2σ of zero right after a start was clamped to rest)
+    zupt_brake_accel : the mean forward acceleration over the 2 s before a still run that
+        makes it a braking to rest, m/s² (below minus this)
     zupt_accel_h : horizontal specific force below this, m/s²
     zupt_gyro : |ω| below this over the block, rad/s
     zupt_accel : std of |f| over the block below this, m/s²
@@ -333,6 +338,8 @@ class VehicleConstraints:
     zupt_sigma: float = 0.02
     zupt_speed: float = 1.0
     zupt_speed_sigmas: float = 0.0
+    zupt_speed_cap: float = 3.0
+    zupt_brake_accel: float = 0.3
     zupt_accel_h: float = 0.1
     zupt_gyro: float = 1.0 * DEG
     zupt_accel: float = 0.15
@@ -579,8 +586,8 @@ class FilterConfig:
 #: (benchmarks/platforms_start.py); not a boat, which yaws about its course in the waves.
 #: ``auto`` is the car's, and :data:`SLOW_PLATFORM`'s when the start shows no car.
 PLATFORMS = {
-    "car": dict(nhc=True, zupt=True, any_start="fallback", course_heading=True,
-                course_heading_sigma=4.0 * DEG),
+    "car": dict(nhc=True, zupt=True, zupt_speed_sigmas=2.0, any_start="fallback",
+                course_heading=True, course_heading_sigma=4.0 * DEG),
     # a walker holding the unit ahead: it moves along its nose, 0-10 deg off (a mount state)
     "pedestrian": dict(nhc=True, mount_states=True, mount_sigma=10.0 * DEG, zupt=True,
                        zupt_speed=0.1, any_start="now", course_heading=True,
@@ -604,6 +611,7 @@ PLATFORMS = {
 #: with a mounting-yaw state (it removed two diverging walker and rover starts, 313 m and 26 m),
 #: zero-velocity updates only when the INS is nearly still, the course a loose heading.
 SLOW_PLATFORM = dict(nhc=True, mount_states=True, mount_sigma=15.0 * DEG, zupt_speed=0.1,
+                     zupt_speed_sigmas=0.0,
                      course_heading=True, course_heading_sigma=20.0 * DEG)
 PLATFORM_ALIASES = {"ship": "boat", "walker": "pedestrian", "multirotor": "drone"}
 PLATFORM_NAMES = ("auto",) + tuple(PLATFORMS) + tuple(PLATFORM_ALIASES)

@@ -30,6 +30,7 @@ and says so). Inside, in order:
 """
 from __future__ import annotations
 
+import collections
 import heapq
 import math
 from dataclasses import dataclass, field, replace
@@ -142,8 +143,10 @@ class NavigatorResult:
         return np.hypot(self.sigma_enu[:, 0], self.sigma_enu[:, 1])
 
 
-def _still(w_blk, f_blk, flt, veh, widen: bool = False):
-    """ZUPT detector on one aiding block: small rates, steady |f|, no horizontal acceleration.
+def _still(w_blk, f_blk, flt, veh, widen: bool | str = False):
+    """ZUPT detector on one aiding block: small rates, steady |f|, no horizontal acceleration
+    (in each half of the block: a brake that turns into a pull-away inside one block keeps
+    ``|f|`` and its mean is level).
 
     An IMU cannot tell rest from constant velocity, so the caller also asks for a slow INS.
     The rates and the levelled specific force are bias-corrected. ``widen``: what the filter
@@ -152,6 +155,7 @@ def _still(w_blk, f_blk, flt, veh, widen: bool = False):
     update takes the widened test (a straight cruise taken for rest turns no more than a stop);
     the zero-velocity update does not: at 0.5 m/s² of bound, a cruise at 5.6 m/s whose INS
     speed a Gauss–Markov fix window had dragged under 1 m/s was clamped to rest.
+    ``widen="gyro"`` widens the rate bound only (the zero-velocity update's test).
     """
     if len(w_blk) < 3:
         return False
@@ -160,11 +164,16 @@ def _still(w_blk, f_blk, flt, veh, widen: bool = False):
     if widen:
         d = flt.P.diagonal()
         slack_w = 3.0 * math.sqrt(max(d[IBG]))
+    if widen is True:
         # the tilt (the attitude's first two) and the horizontal accelerometer biases
         slack_f = 3.0 * math.sqrt(9.81**2 * max(d[IP][:2]) + max(d[IBA][:2]))
+    # each half of the block level on its own: a brake that turns into a pull-away inside
+    # the block keeps |f| and averages to level
+    h = len(f_blk) // 2
+    f_h = [flt.ins.C_nb.T @ f_blk[:h].mean(0), f_n, flt.ins.C_nb.T @ f_blk[h:].mean(0)]
     return (np.max(np.linalg.norm(w_blk, axis=1)) < veh.zupt_gyro + slack_w
             and np.std(np.linalg.norm(f_blk, axis=1)) < veh.zupt_accel
-            and np.hypot(f_n[0], f_n[1]) < veh.zupt_accel_h + slack_f)
+            and max(math.hypot(v[0], v[1]) for v in f_h) < veh.zupt_accel_h + slack_f)
 
 
 def set_course_heading(flt, cov_v, sigma_course):
@@ -313,6 +322,9 @@ class Navigator:
         self._fix_dt_median = 0.0
         self._blk_w, self._blk_f = [], []
         self._still = False
+        self._fwd_hist = collections.deque(maxlen=10)   # forward accelerations, one per block
+        self._imu_still = False
+        self._still_from_braking = False
         self._acc = [0.0, np.zeros(3), np.zeros(3)]
         self._Pm = None
         self._dx = None
@@ -543,6 +555,8 @@ class Navigator:
         self._given_init = None
         self._acc = [0.0, np.zeros(3), np.zeros(3)]
         self._blk_w, self._blk_f = [], []
+        self._fwd_hist.clear()
+        self._imu_still = self._still_from_braking = False
         self._hyp = None
 
     def _start(self, start):
@@ -771,10 +785,30 @@ class Navigator:
         w_blk = np.concatenate(self._blk_w) if self._blk_w else np.zeros((0, 3))
         f_blk = np.concatenate(self._blk_f) if self._blk_f else np.zeros((0, 3))
         self._blk_w, self._blk_f = [], []
-        v_max = max(veh.zupt_speed,
-                    veh.zupt_speed_sigmas * float(np.sqrt(flt.P[3, 3] + flt.P[4, 4])))
+        # the IMU still (its rate bound widened by what the filter does not know of its gyro
+        # biases: a consumer part's 2 °/s turn-on bias hid every stop from the absolute bound)
+        imu_still = bool(veh.zupt) and _still(w_blk, f_blk, flt, veh, widen="gyro")
+        if imu_still and not self._imu_still:
+            # a still run entered from braking is a stop; from speeding up, a cruise (an IMU
+            # cannot tell a cruise from rest)
+            self._still_from_braking = (len(self._fwd_hist) > 0 and float(
+                np.mean(self._fwd_hist)) < -veh.zupt_brake_accel)
+        elif not imu_still and len(f_blk):
+            # along the nose, gravity removed with the INS's pitch (its heading may be anything
+            # at a start). The verdict holds until the next still run begins: after a stop,
+            # a slow pull-away that turns no more than a stop keeps the zero-rate update
+            self._fwd_hist.append(float(f_blk[:, 1].mean()) - flt.gravity(
+                flt.ins.lat, flt.ins.h) * flt.ins.C_nb[1, 2])
+        self._imu_still = imu_still
+        v_max = veh.zupt_speed
+        if self._still_from_braking:
+            # after a braking, rest is what the INS's speed allows within its σ: a stop the
+            # INS reached at 2-4 m/s (its velocity that far off) was never updated
+            v_max = max(v_max, min(veh.zupt_speed_sigmas
+                                   * float(np.sqrt(flt.P[3, 3] + flt.P[4, 4])),
+                                   veh.zupt_speed_cap))
         slow = bool(veh.zupt and np.linalg.norm(flt.ins.velocity_n) < v_max)
-        self._still = slow and _still(w_blk, f_blk, flt, veh)
+        self._still = slow and imu_still
         zaru = veh.zaru and (self._still or (slow and _still(w_blk, f_blk, flt, veh, widen=True)))
         self.bank.judged(self._still)
         if self.vib_reference is not None:
