@@ -305,6 +305,14 @@ class VehicleConstraints:
         cruise whose INS speed sat within 2σ of zero right after a start was clamped to rest)
     zupt_brake_accel : the mean forward acceleration over the 2 s before a still run that
         makes it a braking to rest, m/s² (below minus this)
+    grade_sigma : a level-road prior once a second, ``v_U = 0`` within ``grade_sigma·|v| +
+        0.1`` m/s (a car's: 0.08, ordinary grades; None: off; the road aid gives its own
+        with ``--map``): the pitch error a consumer gyro bias drives after a start in motion
+        is hardly seen by the NHC (the INS's velocity pitches with it) or σ 15 m heights,
+        and leaked gravity into the speed — 12° and 7 m/s in 6 s on docs/realtime.md's drive
+    grade_corr_s : s over which a road's grade holds: each second's prior carries
+        ``1/grade_corr_s`` of its information (at 1 s, drive_0708's real 2–4 % grades pulled
+        the pitch through its outages: an outage end 1.3 → 8.2 m)
     zupt_accel_h : horizontal specific force below this, m/s²
     zupt_gyro : |ω| below this over the block, rad/s
     zupt_accel : std of |f| over the block below this, m/s²
@@ -339,6 +347,8 @@ class VehicleConstraints:
     zupt_speed: float = 1.0
     zupt_speed_sigmas: float = 0.0
     zupt_speed_cap: float = 3.0
+    grade_sigma: float | None = None
+    grade_corr_s: float = 10.0
     zupt_brake_accel: float = 0.3
     zupt_accel_h: float = 0.1
     zupt_gyro: float = 1.0 * DEG
@@ -586,8 +596,8 @@ class FilterConfig:
 #: (benchmarks/platforms_start.py); not a boat, which yaws about its course in the waves.
 #: ``auto`` is the car's, and :data:`SLOW_PLATFORM`'s when the start shows no car.
 PLATFORMS = {
-    "car": dict(nhc=True, zupt=True, zupt_speed_sigmas=2.0, any_start="fallback",
-                course_heading=True, course_heading_sigma=4.0 * DEG),
+    "car": dict(nhc=True, zupt=True, zupt_speed_sigmas=2.0, grade_sigma=0.08,
+                any_start="fallback", course_heading=True, course_heading_sigma=4.0 * DEG),
     # a walker holding the unit ahead: it moves along its nose, 0-10 deg off (a mount state)
     "pedestrian": dict(nhc=True, mount_states=True, mount_sigma=10.0 * DEG, zupt=True,
                        zupt_speed=0.1, any_start="now", course_heading=True,
@@ -611,7 +621,7 @@ PLATFORMS = {
 #: with a mounting-yaw state (it removed two diverging walker and rover starts, 313 m and 26 m),
 #: zero-velocity updates only when the INS is nearly still, the course a loose heading.
 SLOW_PLATFORM = dict(nhc=True, mount_states=True, mount_sigma=15.0 * DEG, zupt_speed=0.1,
-                     zupt_speed_sigmas=0.0,
+                     zupt_speed_sigmas=0.0, grade_sigma=None,
                      course_heading=True, course_heading_sigma=20.0 * DEG)
 PLATFORM_ALIASES = {"ship": "boat", "walker": "pedestrian", "multirotor": "drone"}
 PLATFORM_NAMES = ("auto",) + tuple(PLATFORMS) + tuple(PLATFORM_ALIASES)

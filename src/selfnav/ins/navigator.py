@@ -46,8 +46,8 @@ from selfnav.ins.ekf import (IBA, IBG, IP, IR, IV, PACK, PACK_SIZE, InsGnssFilte
                              output_covariance, pack_state, rts_smooth)
 from selfnav.ins.headings import heading_hypotheses, split_heading
 from selfnav.ins.hypotheses import FaultBank
-from selfnav.ins.measurements import (Heading, NonHolonomic, PositionFix, RunVelocity,
-                                      VelocityFix, WheelSpeed, ZeroRate,
+from selfnav.ins.measurements import (Heading, LevelRoad, NonHolonomic, PositionFix,
+                                      RunVelocity, VelocityFix, WheelSpeed, ZeroRate,
                                       ZeroVelocity)
 from selfnav.ins.policy import FixDecision, FixStatus, NavStatus, chi2_gate
 from selfnav.ins.startup import StartUp
@@ -322,6 +322,7 @@ class Navigator:
         self._fix_dt_median = 0.0
         self._blk_w, self._blk_f = [], []
         self._still = False
+        self._t_grade = -np.inf
         self._fwd_hist = collections.deque(maxlen=10)   # forward accelerations, one per block
         self._imu_still = False
         self._still_from_braking = False
@@ -829,6 +830,17 @@ class Navigator:
                 continue
             if f is flt:
                 self._dx = self._dx + dx
+        if (veh.grade_sigma is not None and self.road_aid is None and not self._still
+                and te - self._t_grade >= 1.0 - 1e-9):
+            # a car drives on roads: the level-road prior (the road aid gives its own), each
+            # second 1/grade_corr_s of a grade's information (a hill lasts tens of seconds)
+            self._t_grade = te
+            s_up = ((veh.grade_sigma * float(np.hypot(*flt.ins.velocity_n[:2])) + 0.1)
+                    * math.sqrt(veh.grade_corr_s))
+            for f in self._filters():
+                dx = f.update(LevelRoad(s_up).model(f))
+                if f is flt:
+                    self._dx = self._dx + dx
         self.bank.on_outage(te, self._t_last_fix)
         if self.road_aid is not None:
             self.road_aid.dead_reckoning = (self.bank.episode is not None
