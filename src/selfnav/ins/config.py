@@ -347,9 +347,9 @@ class VehicleConstraints:
     zupt_speed: float = 1.0
     zupt_speed_sigmas: float = 0.0
     zupt_speed_cap: float = 3.0
+    zupt_brake_accel: float = 0.3
     grade_sigma: float | None = None
     grade_corr_s: float = 10.0
-    zupt_brake_accel: float = 0.3
     zupt_accel_h: float = 0.1
     zupt_gyro: float = 1.0 * DEG
     zupt_accel: float = 0.15

@@ -33,6 +33,7 @@ at a corner), the road heading, a level road (``v_U = 0``).
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numba
@@ -376,6 +377,13 @@ class LevelRoad(Measurement):
 
     sigma: float
     kind = "level"
+
+    @classmethod
+    def at_speed(cls, grade_sigma: float, speed: float, corr_s: float = 1.0) -> "LevelRoad":
+        """The prior of a road whose grade has σ ``grade_sigma`` at horizontal ``speed`` m/s:
+        ``grade_sigma·speed + 0.1`` m/s, times ``√corr_s`` when the grade holds over
+        ``corr_s`` prior intervals (each then carries ``1/corr_s`` of its information)."""
+        return cls((grade_sigma * float(speed) + 0.1) * math.sqrt(corr_s))
 
     def model(self, flt) -> Model:
         H = np.zeros((1, flt.nx))

@@ -159,7 +159,6 @@ def _still(w_blk, f_blk, flt, veh, widen: bool | str = False):
     """
     if len(w_blk) < 3:
         return False
-    f_n = flt.ins.C_nb.T @ f_blk.mean(0)
     slack_w = slack_f = 0.0
     if widen:
         d = flt.P.diagonal()
@@ -167,10 +166,10 @@ def _still(w_blk, f_blk, flt, veh, widen: bool | str = False):
     if widen is True:
         # the tilt (the attitude's first two) and the horizontal accelerometer biases
         slack_f = 3.0 * math.sqrt(9.81**2 * max(d[IP][:2]) + max(d[IBA][:2]))
-    # each half of the block level on its own: a brake that turns into a pull-away inside
-    # the block keeps |f| and averages to level
+    # each half of the block level on its own (the block's mean, between them, is then too):
+    # a brake that turns into a pull-away inside the block keeps |f| and averages to level
     h = len(f_blk) // 2
-    f_h = [flt.ins.C_nb.T @ f_blk[:h].mean(0), f_n, flt.ins.C_nb.T @ f_blk[h:].mean(0)]
+    f_h = [flt.ins.C_nb.T @ f_blk[:h].mean(0), flt.ins.C_nb.T @ f_blk[h:].mean(0)]
     return (np.max(np.linalg.norm(w_blk, axis=1)) < veh.zupt_gyro + slack_w
             and np.std(np.linalg.norm(f_blk, axis=1)) < veh.zupt_accel
             and max(math.hypot(v[0], v[1]) for v in f_h) < veh.zupt_accel_h + slack_f)
@@ -835,10 +834,10 @@ class Navigator:
             # a car drives on roads: the level-road prior (the road aid gives its own), each
             # second 1/grade_corr_s of a grade's information (a hill lasts tens of seconds)
             self._t_grade = te
-            s_up = ((veh.grade_sigma * float(np.hypot(*flt.ins.velocity_n[:2])) + 0.1)
-                    * math.sqrt(veh.grade_corr_s))
+            prior = LevelRoad.at_speed(veh.grade_sigma, np.hypot(*flt.ins.velocity_n[:2]),
+                                       veh.grade_corr_s)
             for f in self._filters():
-                dx = f.update(LevelRoad(s_up).model(f))
+                dx = f.update(prior.model(f))
                 if f is flt:
                     self._dx = self._dx + dx
         self.bank.on_outage(te, self._t_last_fix)

@@ -362,7 +362,7 @@ class EkfRoadAid:
         if self.grade_sigma is None or t - self.t_grade < self.interval - 1e-9:
             return
         self.t_grade = t
-        out.append(LevelRoad(self.grade_sigma * float(np.hypot(v[0], v[1])) + 0.1))
+        out.append(LevelRoad.at_speed(self.grade_sigma, np.hypot(v[0], v[1])))
         self.counts["grade"] += 1
 
     def constraints(self, t, flt):
