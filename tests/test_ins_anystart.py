@@ -311,3 +311,50 @@ def test_a_quiet_imu_at_rest_starts_at_rest_once_the_fixes_bound_its_acceleratio
     init = init_anywhere(imu, gnss, cfg, np.full(len(gnss.t), 10.0))
     assert init["start_kind"] == "rest"
     assert math.radians(0.5) < init["sigmas"][2][0] < math.radians(6.0)
+
+
+def test_no_start_is_fitted_on_an_outlier_window_after_the_first_healthy_run():
+    """The start is fitted on the latest fixes, so they must look healthy too, not only the
+    first run of the record: 25 fixes of white 250 m outliers after 35 healthy ones refuse it
+    (simulated short consumer drive 108 started inside such a window, σ the scatter's, and its
+    next outlier — 253 m off at the receiver's 10 m σ — was taken: 5 % of rows beyond 5σ);
+    a 5σ spike among them (a 10 m receiver's 50 m) does not."""
+    sim, imu, gnss = _sim("rover", "moving", seed=21, duration=60.0)
+    cfg = ic.navigator_config(platform="rover")
+    imu, gnss = _upto(imu, gnss, 59.5)
+    any_start(imu, gnss, cfg)                                    # healthy: a start
+    rng = np.random.default_rng(3)
+    bad = gnss.select(slice(None))
+    k = len(bad.t) - 25
+    rm = 6.371e6
+    bad.lat = bad.lat.copy()
+    bad.lon = bad.lon.copy()
+    bad.lat[k:] += rng.normal(0.0, 250.0, 25) / rm
+    bad.lon[k:] += rng.normal(0.0, 250.0, 25) / (rm * np.cos(bad.lat[k:]))
+    with pytest.raises(SelfnavError, match="do not look healthy"):
+        any_start(imu, bad, cfg)
+    spike = gnss.select(slice(None))
+    spike.lat = spike.lat.copy()
+    spike.lat[-8] += 5.0 * spike.sigma_m[-8] / rm
+    any_start(imu, spike, cfg)
+
+
+def test_a_short_consumer_drive_does_not_start_inside_an_outlier_window():
+    """Simulated short consumer drive 108: fixes 0-24 s healthy, 25-81 s white outliers
+    (σ ~250 m). The start waits for the clean fixes after them; its σ is a promise (p95 of
+    error/σ_h measured 0.83, 5.02 with 5 % of rows beyond 5σ before)."""
+    import warnings
+
+    from selfnav.earth import radii
+
+    sim = selfnav.simulate("car", seed=108, grade="consumer", duration=120.0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        sol = selfnav.navigate(sim.imu, sim.gnss.as_gnss())
+    a, tr = sol.trajectory, sim.truth
+    assert a.t[0] > 82.0
+    lat, lon = np.interp(a.t, tr.t, tr.lat), np.interp(a.t, tr.t, tr.lon)
+    rm, rn = radii(lat)
+    e = np.hypot((a.lat - lat) * rm, (a.lon - lon) * rn * np.cos(lat))
+    r = e / sol.columns["sigma_h_m"]
+    assert np.percentile(r, 95) < 2.0 and np.mean(r > 5.0) < 0.01

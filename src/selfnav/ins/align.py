@@ -648,7 +648,7 @@ HEALTHY_MEDIAN_RATIO = 1.6
 HEALTHY_RMS_RATIO = 1.4
 
 
-def healthy_start(t, xy, sigma, window=20):
+def healthy_start(t, xy, sigma, window=20, each=True):
     """Index of the first fix of a run of ``window`` fixes that look healthy without an INS.
 
     The second differences of the positions, ``z_k − 2 z_{k−1} + z_{k−2}`` (a constant-velocity
@@ -656,7 +656,8 @@ def healthy_start(t, xy, sigma, window=20):
     over the run must stay below ``1.6 ×`` its nominal Rayleigh median, their RMS per axis below
     ``1.4 √6 σ`` and each below ``4 √6 σ``. White 200 m outliers fail at once; drifting ones
     (Gauss-Markov, 200 m σ, τ 60 s: 36 m per second) fail on the median and the RMS. Returns
-    None when no such run exists. ``t`` must be ~regular.
+    None when no such run exists. ``t`` must be ~regular. ``each=False`` drops the bound on
+    each difference (one 50 m spike among 10 m fixes exceeds it, not the median or the RMS).
     """
     xy = np.asarray(xy, float)
     n = len(xy)
@@ -664,7 +665,7 @@ def healthy_start(t, xy, sigma, window=20):
         return None
     d2 = np.hypot(*(xy[2:] - 2 * xy[1:-1] + xy[:-2]).T)     # d2[i] belongs to fix i + 2
     s6 = np.sqrt(6.0) * np.asarray(sigma, float)[2:]
-    ok_each = d2 < 4.0 * s6
+    ok_each = d2 < 4.0 * s6 if each else np.ones(len(d2), bool)
     for k in range(0, n - 2 - window + 1):
         seg = slice(k, k + window)
         s6k = float(np.median(s6[seg]))

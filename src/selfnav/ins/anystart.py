@@ -383,6 +383,12 @@ def any_start(imu: ImuData, gnss: GnssData, cfg: FilterConfig, magnetometer=()) 
     k = healthy_start(gnss.t, xy, sig, window)
     if k is None:
         raise SelfnavError(f"no run of {window} healthy GNSS fixes yet")
+    # the start is fitted on the latest fixes: they too must look healthy (an outlier window
+    # after the first healthy run scatters the fit, and a start inside it — its σ the scatter's
+    # — took the next outlier, 250 m off, at the receiver's 10 m σ: simulated drive 108)
+    n = window + 2
+    if k + n < len(sig) and healthy_start(gnss.t[-n:], xy[-n:], sig[-n:], window, each=False) != 0:
+        raise SelfnavError(f"the last {n} GNSS fixes do not look healthy (an outlier window?)")
     out = init_anywhere(imu, gnss.select(slice(k, None)), cfg, sig[k:], magnetometer)
     out["t_healthy"] = float(gnss.t[k])         # where the healthy run begins
     return out
