@@ -36,6 +36,7 @@ Three steps, used as the data allow:
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -435,6 +436,31 @@ def levelling_map(C_bn):
 #: σ of a tilt levelled on the mean specific force of a straight constant-speed window, rad
 WINDOW_TILT_SIGMA = np.radians(4.0)
 
+
+def window_gyro_bias(omega_ib_b, f_mean_b, duration, tilt_change_sigma, prior_sigma):
+    """The gyro biases about the level axes from a window of driving (DESIGN §10).
+
+    A vehicle's tilt over a window of ``duration`` seconds changes by no more than its road
+    does (the grade and the cross-slope at the two ends), so the mean rate about the level
+    axes — those perpendicular to the mean specific force ``f_mean_b``, gravity in a
+    straight constant-speed window — is their bias plus ``Δtilt / duration``. That
+    measurement (σ ``tilt_change_sigma / duration`` with the samples' own scatter) is fused
+    with the prior (``prior_sigma`` per axis, mean zero); about the vertical the mean rate is
+    the turn of the heading and the prior stays. Returns the bias (body, rad/s) and its 3×3
+    covariance.
+    """
+    w = np.asarray(omega_ib_b, float)
+    u = np.asarray(f_mean_b, float)
+    u = u / np.linalg.norm(u)
+    level = np.eye(3) - np.outer(u, u)
+    z = level @ w.mean(axis=0)
+    s2 = (float(tilt_change_sigma) / float(duration)) ** 2 + float(
+        np.max(np.var(w, axis=0))) / len(w)
+    p2 = float(prior_sigma) ** 2
+    k = p2 / (p2 + s2)
+    return k * z, level * (k * s2) + np.outer(u, u) * p2
+
+
 #: seconds of one stop agree on the direction of the specific force to this, rad
 STOP_TILT_AGREE = np.radians(0.2)
 
@@ -531,7 +557,10 @@ def init_from_gnss(imu, gnss: GnssData, cfg: FilterConfig, sig_h):
        rate less the vertical Earth rate; the horizontal Earth rate is left in their σ).
        Without a still period, or where its tilt and the window's disagree by more than the
        window's σ (``WINDOW_TILT_SIGMA``: the "still" second was the first of a pull-away):
-       levelled from the mean specific force over the straight, constant-speed window.
+       levelled from the mean specific force over the straight, constant-speed window, and
+       with a road vehicle's ``grade_sigma`` the gyro biases about the level axes from the
+       window's mean rate (:func:`window_gyro_bias`; ``gyro_bias_from="window"``: a stop
+       measured in the buffer supersedes it).
     """
     n = len(gnss.t)
     dtf = float(np.median(np.diff(gnss.t))) if n > 1 else 1.0
@@ -614,6 +643,16 @@ def init_from_gnss(imu, gnss: GnssData, cfg: FilterConfig, sig_h):
                 # frame-free)
                 C_bn0 = (att.dcm_nb_from_euler(roll, pitch, np.arctan2(v0[0], v0[1])).T
                          @ att.quat_to_dcm(q[-1]).T)
+        if "gyro_bias" not in out and cfg.vehicle.grade_sigma is not None:
+            # no stop before: the biases about the level axes from the window's mean rate (a
+            # car's tilt changes by its road's grade at most; a consumer part's 1 °/s prior
+            # let a 2.5 °/s pitch-rate bias tilt the start 12° at σ 4°, simulated drives)
+            dur = float(gnss.t[sl][-1] - gnss.t[sl][0])
+            bg, cbg = window_gyro_bias(imu.omega_ib_b[jw[0]:jw[-1] + 1], f_w, dur,
+                                       math.sqrt(2.0) * math.atan(cfg.vehicle.grade_sigma),
+                                       cfg.imu.gyro_bias_sigma)
+            out.update(gyro_bias=bg, gyro_bias_sigma=np.sqrt(np.diag(cbg)),
+                       gyro_bias_cov=cbg, gyro_bias_from="window")
         out["tilt_bias_map"] = levelling_map(C_bn0)
         s_hdg = np.arctan2(sv, speed) + np.radians(2.0)
         # the acceleration at the start: the start's velocity carries the IMU time offset's

@@ -194,7 +194,7 @@ def set_course_heading(flt, cov_v, sigma_course):
 def initial_filter(cfg: FilterConfig, init: dict, time_offset_applied: float = 0.0):
     """The error-state filter of a start ``init`` (true time ``t``, ``lat, lon, h, velocity_n,
     C_nb``; optionally ``sigmas`` (position, velocity, attitude σ triples), ``gyro_bias`` and
-    its σ, ``tilt_bias_map``: levelled on biased accelerometers, tilt and horizontal bias are
+    its σ (or its 3×3 covariance ``gyro_bias_cov``), ``tilt_bias_map``: levelled on biased accelerometers, tilt and horizontal bias are
     one error, :func:`selfnav.ins.align.levelling_map`)."""
     flt = InsGnssFilter(cfg, float(init["t"]) - time_offset_applied, init["lat"], init["lon"],
                         init["h"], init["velocity_n"], init["C_nb"],
@@ -215,7 +215,8 @@ def initial_filter(cfg: FilterConfig, init: dict, time_offset_applied: float = 0
         flt.P[IBA, IP] = (A @ Pb).T
     if "gyro_bias" in init:
         flt.bg = np.array(init["gyro_bias"], dtype=float)
-        flt.P[IBG, IBG] = np.diag(np.square(init["gyro_bias_sigma"]))
+        flt.P[IBG, IBG] = (np.asarray(init["gyro_bias_cov"], float) if "gyro_bias_cov" in init
+                           else np.diag(np.square(init["gyro_bias_sigma"])))
     if flt.layout.toff is not None:
         i = flt.layout.toff.start
         share = float(np.hypot(*np.asarray(init["velocity_n"], float)[:2]) * np.sqrt(flt.P[i, i]))

@@ -172,10 +172,14 @@ class StartUp:
             return None
         init = dict(init)
         cfg = init.pop("start_cfg", cfg)
-        if "gyro_bias" not in init and measured is not None and measured.gyro_bias is not None:
+        if (("gyro_bias" not in init or init.get("gyro_bias_from") == "window")
+                and measured is not None and measured.gyro_bias is not None):
             # a stop in the buffer measured the gyro bias (the Earth rate in its σ); the start
             # in motion has not (its own look back is 30 s: drive_0708 crept for 18 s after
-            # its stop) and would begin from the grade's prior — a consumer part's 1 °/s
+            # its stop) and would begin from the grade's prior — a consumer part's 1 °/s —
+            # or from its window's level axes alone
+            init.pop("gyro_bias_cov", None)
+            init.pop("gyro_bias_from", None)
             init["gyro_bias"] = np.asarray(measured.gyro_bias, float)
             init["gyro_bias_sigma"] = np.full(3, math.hypot(measured.gyro_bias_sigma,
                                                             cfg.imu.gyro_bias_instability))
