@@ -48,6 +48,7 @@ from selfnav.errors import SelfnavError
 from selfnav.latitude import estimate_latitude, gyro_attitude
 from selfnav.ins.strapdown import integrate_imu
 from selfnav.ins.config import FilterConfig, chi2_999
+from selfnav.ins.course import TURN_SIGMA_SHARE, centre_state
 from selfnav.units import wrap_pi
 from selfnav.types import GnssData
 
@@ -515,27 +516,6 @@ def _still_before(imu, t_end, gnss=None, g=9.8, window=1.0, lookback=30.0, accel
     return None
 
 
-def course_heading_covariance(velocity_n, cov_v, sigma_course):
-    """Covariance of a start whose heading is the course of its velocity (DESIGN §10).
-
-    Heading ``H = atan2(v_E, v_N)`` of the velocity ``v`` (ENU, horizontal covariance
-    ``cov_v``): ``δv = δs u + s δc w`` (``u`` along, ``w = (cos H, −sin H)`` across, ``s`` the
-    speed), so the course error is ``δc = w·δv / s`` and the heading error
-    ``ψ_U = δc − β`` with ``β`` the vehicle's own heading about its course (slip, the IMU's
-    yaw on the vehicle; σ ``sigma_course``). Returns ``(P_vv, P_vψ, P_ψψ)``: the 2×2
-    velocity block, its column with ``ψ_U`` and ``ψ_U``'s variance. Set independent, the
-    heading and the velocity's direction — one measurement — look like two, and the
-    non-holonomic constraint (the body moves along its heading) "learns" the heading from
-    their difference: the start's heading σ then shrank 3× in 20 s while its error stayed
-    (simulated drives, 13° at σ 4°)."""
-    v = np.asarray(velocity_n, float)[:2]
-    s = max(float(np.hypot(*v)), 1e-6)
-    w = np.array([v[1], -v[0]]) / s
-    C = np.asarray(cov_v, float)
-    cv = C @ w / s
-    return C, cv, float(w @ C @ w) / s**2 + float(sigma_course) ** 2
-
-
 #: The start's position and velocity σ are twice the fit's (:func:`init_from_gnss`,
 #: :func:`selfnav.ins.anystart.init_anywhere`): the start holds a quarter of its window's
 #: information, and the navigator fuses the fixes after the start's time with the other
@@ -550,8 +530,9 @@ def init_from_gnss(imu, gnss: GnssData, cfg: FilterConfig, sig_h):
        at constant speed (χ² of the line fit), moving fast enough that the course is known
        (speed above ``min_init_speed`` and four times its σ). The window is long enough for a
        velocity σ of 0.5 m/s (a 10 m σ receiver at 1 Hz needs 17 fixes; at most 20).
-       Position and velocity from the fit at its centre, heading from the course (a car moves
-       along its body y axis).
+       Position and velocity at its centre from the fit and the IMU's shape of the motion
+       within it (:func:`centre_state`: 10 m fixes hide a brake or a corner from the line
+       test), heading from that velocity (a car moves along its body y axis).
     2. Roll and pitch: levelled in the last still second before (GNSS confirms it is still),
        carried to the start by the gyros; the still period also gives the gyro biases (mean
        rate less the vertical Earth rate; the horizontal Earth rate is left in their σ).
@@ -588,6 +569,14 @@ def init_from_gnss(imu, gnss: GnssData, cfg: FilterConfig, sig_h):
         if gnss.velocity_n is not None:
             v0 = np.array([np.interp(t0, gnss.t[sl], gnss.velocity_n[sl, i]) for i in range(3)])
             sv = cfg.gnss.velocity_sigma
+        turn = 0.0
+        if gnss.velocity_n is None:
+            # the fit's velocity is a mean over the window, the start needs the centre's:
+            # the IMU's shape of the motion within it
+            cs = centre_state(imu, gnss.t[sl], t0, coef[:, :2])
+            if cs is not None:
+                coef[0, :2], v_en, turn = cs
+                v0 = np.array([v_en[0], v_en[1], v0[2]])
         speed = float(np.hypot(v0[0], v0[1]))
         if speed <= max(cfg.init.min_speed, 6.0 * sv):
             continue
@@ -654,7 +643,7 @@ def init_from_gnss(imu, gnss: GnssData, cfg: FilterConfig, sig_h):
             out.update(gyro_bias=bg, gyro_bias_sigma=np.sqrt(np.diag(cbg)),
                        gyro_bias_cov=cbg, gyro_bias_from="window")
         out["tilt_bias_map"] = levelling_map(C_bn0)
-        s_hdg = np.arctan2(sv, speed) + np.radians(2.0)
+        s_hdg = np.hypot(np.arctan2(sv, speed) + np.radians(2.0), TURN_SIGMA_SHARE * turn)
         # the acceleration at the start: the start's velocity carries the IMU time offset's
         # error through it (navigator.set_stamp_time)
         acc = np.zeros(3)

@@ -228,7 +228,7 @@ class Initialisation:
     course_heading_sigma : σ of a vehicle's heading about the course it is taken from (a
         fact of the vehicle: its slip angle and the IMU's yaw on it), rad — beyond this the
         heading's error is the course's, one error with the velocity's cross-track part
-        (:func:`selfnav.ins.align.course_heading_covariance`)
+        (:func:`selfnav.ins.course.course_heading_covariance`)
     """
 
     pos_sigma: float = 10.0

@@ -177,9 +177,9 @@ def _still(w_blk, f_blk, flt, veh, widen: bool | str = False):
 
 def set_course_heading(flt, cov_v, sigma_course):
     """``flt``'s velocity and heading covariance for a heading taken from the course of its
-    velocity (:func:`selfnav.ins.align.course_heading_covariance`): the horizontal velocity
+    velocity (:func:`selfnav.ins.course.course_heading_covariance`): the horizontal velocity
     block and its correlation with ``ψ_U``, uncorrelated with the rest."""
-    from selfnav.ins.align import course_heading_covariance
+    from selfnav.ins.course import course_heading_covariance
 
     C, cv, var = course_heading_covariance(flt.ins.velocity_n, cov_v, sigma_course)
     P = flt.P
