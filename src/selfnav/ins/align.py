@@ -438,7 +438,8 @@ def levelling_map(C_bn):
 WINDOW_TILT_SIGMA = np.radians(4.0)
 
 
-def window_gyro_bias(omega_ib_b, f_mean_b, duration, tilt_change_sigma, prior_sigma):
+def window_gyro_bias(omega_ib_b, f_mean_b, duration, tilt_change_sigma, prior_sigma,
+                     speed=0.0):
     """The gyro biases about the level axes from a window of driving (DESIGN §10).
 
     A vehicle's tilt over a window of ``duration`` seconds changes by no more than its road
@@ -447,15 +448,22 @@ def window_gyro_bias(omega_ib_b, f_mean_b, duration, tilt_change_sigma, prior_si
     straight constant-speed window — is their bias plus ``Δtilt / duration``. That
     measurement (σ ``tilt_change_sigma / duration`` with the samples' own scatter) is fused
     with the prior (``prior_sigma`` per axis, mean zero); about the vertical the mean rate is
-    the turn of the heading and the prior stays. Returns the bias (body, rad/s) and its 3×3
+    the turn of the heading and the prior stays. A window that turns (mean rate ``ω`` about
+    the vertical at ``speed``) tilts the mean specific force off the vertical by its
+    centripetal acceleration, ``v ω / g``, and leaks ``v ω² / g`` of the turn into the level
+    axes: that goes into the σ (drive_0708 circled 255° in a window of 10 m fixes that
+    passed the line test: a 2.1 °/s leak). Returns the bias (body, rad/s) and its 3×3
     covariance.
     """
     w = np.asarray(omega_ib_b, float)
     u = np.asarray(f_mean_b, float)
-    u = u / np.linalg.norm(u)
+    g = float(np.linalg.norm(u))
+    u = u / g
     level = np.eye(3) - np.outer(u, u)
     z = level @ w.mean(axis=0)
-    s2 = (float(tilt_change_sigma) / float(duration)) ** 2 + float(
+    w_up = float(u @ w.mean(axis=0))
+    leak = float(speed) * w_up**2 / g
+    s2 = (float(tilt_change_sigma) / float(duration)) ** 2 + leak**2 + float(
         np.max(np.var(w, axis=0))) / len(w)
     p2 = float(prior_sigma) ** 2
     k = p2 / (p2 + s2)
@@ -639,7 +647,7 @@ def init_from_gnss(imu, gnss: GnssData, cfg: FilterConfig, sig_h):
             dur = float(gnss.t[sl][-1] - gnss.t[sl][0])
             bg, cbg = window_gyro_bias(imu.omega_ib_b[jw[0]:jw[-1] + 1], f_w, dur,
                                        math.sqrt(2.0) * math.atan(cfg.vehicle.grade_sigma),
-                                       cfg.imu.gyro_bias_sigma)
+                                       cfg.imu.gyro_bias_sigma, speed)
             out.update(gyro_bias=bg, gyro_bias_sigma=np.sqrt(np.diag(cbg)),
                        gyro_bias_cov=cbg, gyro_bias_from="window")
         out["tilt_bias_map"] = levelling_map(C_bn0)
