@@ -1,5 +1,5 @@
 """The gyro biases about the level axes from the start's window of driving
-(selfnav.ins.align.window_gyro_bias; issue 18): analytic, on the real drive_0708 against the
+(selfnav.ins.course.window_gyro_bias; issue 18): analytic, on the real drive_0708 against the
 bias its stop measured, and on simulated short consumer drives (labelled as such)."""
 import math
 import warnings
@@ -11,7 +11,8 @@ import selfnav
 from selfnav.earth import radii
 from selfnav.ins import calibrate
 from selfnav.ins import config as ic
-from selfnav.ins.align import robust_init, window_gyro_bias
+from selfnav.ins.align import robust_init
+from selfnav.ins.course import window_gyro_bias
 
 DEG = math.pi / 180.0
 
