@@ -38,7 +38,7 @@ def test_the_realtime_loop_runs_as_written(capsys):
 
 
 def test_the_realtime_loop_sigma_covers_the_truth(capsys):
-    """A consumer IMU started in motion with no still period: p95 of error/σ_h 1.75 since
+    """A consumer IMU started in motion with no still period: p95 of error/σ_h 1.59 since
     stop 40 (the start's gyro biases about the level axes from its window: this drive's
     2.49 °/s pitch-rate bias tilted it 12° at σ 4° before; 2.51 at stop 39, 2.66 before the
     car's level-road prior, 3.2 while the start left the second half of its window of fixes

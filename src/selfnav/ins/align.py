@@ -48,7 +48,7 @@ from selfnav.errors import SelfnavError
 from selfnav.latitude import estimate_latitude, gyro_attitude
 from selfnav.ins.strapdown import integrate_imu
 from selfnav.ins.config import FilterConfig, chi2_999
-from selfnav.ins.course import TURN_SIGMA_SHARE, centre_state, window_gyro_bias
+from selfnav.ins.course import window_gyro_bias
 from selfnav.units import wrap_pi
 from selfnav.types import GnssData
 
@@ -506,9 +506,8 @@ def init_from_gnss(imu, gnss: GnssData, cfg: FilterConfig, sig_h):
        at constant speed (χ² of the line fit), moving fast enough that the course is known
        (speed above ``min_init_speed`` and four times its σ). The window is long enough for a
        velocity σ of 0.5 m/s (a 10 m σ receiver at 1 Hz needs 17 fixes; at most 20).
-       Position and velocity at its centre from the fit and the IMU's shape of the motion
-       within it (:func:`centre_state`: 10 m fixes hide a brake or a corner from the line
-       test), heading from that velocity (a car moves along its body y axis).
+       Position and velocity from the fit at its centre, heading from the course (a car moves
+       along its body y axis).
     2. Roll and pitch: levelled in the last still second before (GNSS confirms it is still),
        carried to the start by the gyros; the still period also gives the gyro biases (mean
        rate less the vertical Earth rate; the horizontal Earth rate is left in their σ).
@@ -545,14 +544,6 @@ def init_from_gnss(imu, gnss: GnssData, cfg: FilterConfig, sig_h):
         if gnss.velocity_n is not None:
             v0 = np.array([np.interp(t0, gnss.t[sl], gnss.velocity_n[sl, i]) for i in range(3)])
             sv = cfg.gnss.velocity_sigma
-        turn = 0.0
-        if gnss.velocity_n is None:
-            # the fit's velocity is a mean over the window, the start needs the centre's:
-            # the IMU's shape of the motion within it
-            cs = centre_state(imu, gnss.t[sl], t0, coef[:, :2])
-            if cs is not None:
-                coef[0, :2], v_en, turn = cs
-                v0 = np.array([v_en[0], v_en[1], v0[2]])
         speed = float(np.hypot(v0[0], v0[1]))
         if speed <= max(cfg.init.min_speed, 6.0 * sv):
             continue
@@ -619,7 +610,7 @@ def init_from_gnss(imu, gnss: GnssData, cfg: FilterConfig, sig_h):
             out.update(gyro_bias=bg, gyro_bias_sigma=np.sqrt(np.diag(cbg)),
                        gyro_bias_cov=cbg, gyro_bias_from="window")
         out["tilt_bias_map"] = levelling_map(C_bn0)
-        s_hdg = np.hypot(np.arctan2(sv, speed) + np.radians(2.0), TURN_SIGMA_SHARE * turn)
+        s_hdg = np.arctan2(sv, speed) + np.radians(2.0)
         # the acceleration at the start: the start's velocity carries the IMU time offset's
         # error through it (navigator.set_stamp_time)
         acc = np.zeros(3)

@@ -56,7 +56,6 @@ from selfnav import attitude as att
 from selfnav.earth import enu_offset, radii
 from selfnav.errors import SelfnavError
 from selfnav.ins.align import START_FIX_SHARE, fix_sigmas, healthy_start
-from selfnav.ins.course import TURN_SIGMA_SHARE, centre_state
 from selfnav.ins.config import FilterConfig, chi2_999
 from selfnav.ins.rest import (IGRF_DECLINATION_SIGMA_DEG, MAX_GYRO_BIAS, MAX_STILL_ACCEL_STD,
                               MAX_STILL_GYRO_STD, declination_at, find_still,
@@ -300,7 +299,6 @@ def init_anywhere(imu: ImuData, gnss: GnssData, cfg: FilterConfig, sig_h,
                 raise SelfnavError("the IMU is quiet but the fixes cannot yet tell rest from a "
                                    "steady acceleration")
     out = dict(t=t0, t_used=t_used, h=float(coef[0, 2]), fix_share=START_FIX_SHARE)
-    straight, turn = False, 0.0
     if at_rest:
         lev = level_at_rest(imu.f_ib_b[j0:j1], imu.omega_ib_b[j0:j1], dt=dt,
                             accel_bias_sigma=accel_sig, lat=lat_r)
@@ -343,14 +341,6 @@ def init_anywhere(imu: ImuData, gnss: GnssData, cfg: FilterConfig, sig_h,
         s_tilt = math.hypot(math.atan((a_mean + 2.0 * s_a + accel_sig) / g),
                             gyro_sig * dur, math.radians(0.3))
         xy0 = coef[0, :2]
-        straight = ini.course_heading and speed > 6.0 * sv
-        cs = (centre_state(imu, t, t0, coef[:, :2], w)
-              if straight and gnss.velocity_n is None else None)
-        if cs is not None:
-            # the fit's velocity is a mean over the window, the start needs the centre's (the
-            # body moves along its forward axis, as the course heading assumes)
-            xy0, v_en, turn = cs
-            v0 = np.array([v_en[0], v_en[1], v0[2]])
         s_v = np.array([2 * sv, 2 * sv, 2 * sv + 0.2])
         kind = "moving"
         bias = _bias_from_last_stop(imu, j0, dt, accel_sig, lat_r, cfg)
@@ -358,10 +348,9 @@ def init_anywhere(imu: ImuData, gnss: GnssData, cfg: FilterConfig, sig_h,
             out["gyro_bias"], out["gyro_bias_sigma"] = bias
     lat = lat_r + xy0[1] / rm
     lon = lon_r + xy0[0] / (rn * math.cos(lat_r))
-    if straight:
+    if not at_rest and ini.course_heading and speed > 6.0 * sv:
         hdg = math.atan2(v0[0], v0[1])
-        s_hdg = math.hypot(math.atan2(sv, speed) + ini.course_heading_sigma,
-                           TURN_SIGMA_SHARE * turn)
+        s_hdg = math.atan2(sv, speed) + ini.course_heading_sigma
         out["course_cov"] = np.eye(2) * (2 * sv) ** 2
         source = "course"
     else:
