@@ -437,7 +437,6 @@ def levelling_map(C_bn):
 #: σ of a tilt levelled on the mean specific force of a straight constant-speed window, rad
 WINDOW_TILT_SIGMA = np.radians(4.0)
 
-
 #: seconds of one stop agree on the direction of the specific force to this, rad
 STOP_TILT_AGREE = np.radians(0.2)
 

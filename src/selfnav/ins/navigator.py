@@ -194,8 +194,9 @@ def set_course_heading(flt, cov_v, sigma_course):
 def initial_filter(cfg: FilterConfig, init: dict, time_offset_applied: float = 0.0):
     """The error-state filter of a start ``init`` (true time ``t``, ``lat, lon, h, velocity_n,
     C_nb``; optionally ``sigmas`` (position, velocity, attitude σ triples), ``gyro_bias`` and
-    its σ (or its 3×3 covariance ``gyro_bias_cov``), ``tilt_bias_map``: levelled on biased accelerometers, tilt and horizontal bias are
-    one error, :func:`selfnav.ins.align.levelling_map`)."""
+    its σ (or its 3×3 covariance ``gyro_bias_cov``), ``tilt_bias_map``: levelled on biased
+    accelerometers, tilt and horizontal bias are one error,
+    :func:`selfnav.ins.align.levelling_map`)."""
     flt = InsGnssFilter(cfg, float(init["t"]) - time_offset_applied, init["lat"], init["lon"],
                         init["h"], init["velocity_n"], init["C_nb"],
                         time_offset_applied=time_offset_applied)
