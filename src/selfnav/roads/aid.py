@@ -483,7 +483,12 @@ class EkfRoadAid:
         if kind == "curve":
             out["sigma"] = self.curve_sigma
             return meas + [out]
-        out["sigma"] = self.sigma_cross
+        # the cloud's own spread across the line: the weight it leaves on other roads (a
+        # divided road's other carriageway, a parallel street) is the chance the line is the
+        # wrong one (simulated campaign drive 8234251124038289217: 80 % of the cloud on a
+        # road 8 m from the truth, the constraint at σ 1 m held the filter there at σ 2.3 m)
+        off_c = (pos - p_ins) @ n + out["offset"]
+        out["sigma"] = float(np.hypot(self.sigma_cross, np.sqrt(w @ off_c**2 / w.sum())))
         if self.sigma_heading is None:
             del out["heading"]
         else:
