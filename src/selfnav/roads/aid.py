@@ -488,7 +488,7 @@ class EkfRoadAid:
         # wrong one (simulated campaign drive 8234251124038289217: 80 % of the cloud on a
         # road 8 m from the truth, the constraint at σ 1 m held the filter there at σ 2.3 m)
         off_c = (pos - p_ins) @ n + out["offset"]
-        out["sigma"] = float(np.hypot(self.sigma_cross, np.sqrt(w @ off_c**2 / w.sum())))
+        out["sigma"] = float(np.hypot(self.sigma_cross, np.sqrt(w @ off_c**2)))   # w sums to 1
         if self.sigma_heading is None:
             del out["heading"]
         else:
