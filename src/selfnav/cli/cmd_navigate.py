@@ -51,13 +51,48 @@ def _odometer(imu_path: Path, odo_path: Path | None):
     return read_odometer(imu_path) if has_odometer(imu_path) else None
 
 
+def _navigate_raw(path: Path, out: Path, *, smooth: bool, fix_log, out_datum: str,
+                  as_json: bool) -> None:
+    """``navigate --gnss-raw``: :func:`selfnav.api.navigate_raw`, written and reported."""
+    from selfnav import api
+    from selfnav.cli.progress import bar
+
+    t0 = time.perf_counter()
+    with bar("navigating (tight)", enabled=not as_json) as update:
+        sol = api.navigate_raw(path, smooth=smooth,
+                               progress=lambda done, total: update(done / max(total, 1)))
+    elapsed = time.perf_counter() - t0
+    sol.to_csv(out, datum=out_datum, comments=[
+        f"selfnav navigate --gnss-raw {path.name}{' --smooth' if smooth else ''}"])
+    if fix_log is not None:
+        api.write_tight_log(fix_log, sol)
+    s = sol.stats
+    span = float(sol.t[-1] - sol.t[0]) if len(sol) > 1 else 0.0
+    summary = {"method": sol.method, "epochs": len(sol), "duration_s": span,
+               "seconds": elapsed, "real_time_factor": span / max(elapsed, 1e-9), **s,
+               "out": str(out)}
+    if as_json:
+        emit_json(summary)
+        return
+    print(f"{out}: {len(sol)} epochs over {span:.1f} s, {elapsed:.1f} s "
+          f"({summary['real_time_factor']:.0f}× real time), tightly coupled"
+          f"{' and smoothed' if smooth else ''}")
+    print(f"  satellites given a delayed component: {100 * s['reflected_share']:.0f} %; "
+          f"median σ_h {s['median_sigma_h_m']:.1f} m (errors correlated over epochs: "
+          f"σ inflated {s['inflation_median']:.0f}× in variance)")
+
+
 def register(app: typer.Typer) -> None:
     @app.command("navigate")
     def navigate_cmd(
-        imu: opt.ImuFile,
         out: opt.out_file("Solution CSV (t, lat_deg, lon_deg, h_m, velocity, attitude, σ, "
                           "sigma_h_m, gnss status)."),
+        imu: opt.OptionalImuFile = None,
         gnss: opt.OptionalGnssFile = None,
+        gnss_raw: Annotated[Optional[Path], typer.Option(
+            "--gnss-raw", help="Raw pseudoranges with the car's speed and yaw rate in the same "
+                               "file (smartLoc format): tightly coupled, every satellite judged "
+                               "on its own; instead of --imu and --gnss.")] = None,
         method: Annotated[str, opt.choice_option(
             "--method", choices=("ekf", "seed"),
             help="ekf: error-state Kalman filter; seed: seed 004's two loops (needs --map).")
@@ -139,6 +174,17 @@ def register(app: typer.Typer) -> None:
         check_output_file(out)
         if fix_log is not None:
             check_output_file(fix_log)
+        if gnss_raw is not None:
+            if imu is not None or gnss is not None or map_ is not None:
+                raise SelfnavError("--gnss-raw navigates from its own pseudoranges and odometry: "
+                                   "give it without --imu, --gnss and --map (tight coupling "
+                                   "with an IMU is not built yet)")
+            _navigate_raw(gnss_raw, out, smooth=smooth, fix_log=fix_log, out_datum=out_datum,
+                          as_json=as_json)
+            return
+        if imu is None:
+            raise SelfnavError("navigate needs --imu FILE (or --gnss-raw FILE: pseudoranges "
+                               "with the car's odometry)")
         if gnss is None and init is None:
             raise SelfnavError("navigate needs --gnss FILE (or an initial state: --init FILE)")
         lever = None if lever_arm is None else _vec3(lever_arm, "--lever-arm")

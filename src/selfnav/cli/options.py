@@ -69,6 +69,10 @@ ImuFile = Annotated[Path, typer.Option(
     "--imu", help="IMU file: native CSV (t, wx, wy, wz, fx, fy, fz; s, rad/s, m/s²), PSINS "
                   ".imu, rtklibexplorer CSV with its .tag, KF-GINS, PX4 ULog .ulg (see "
                   "--imu-format).")]
+OptionalImuFile = Annotated[Optional[Path], typer.Option(
+    "--imu", help="IMU file: native CSV (t, wx, wy, wz, fx, fy, fz; s, rad/s, m/s²), PSINS "
+                  ".imu, rtklibexplorer CSV with its .tag, KF-GINS, PX4 ULog .ulg (see "
+                  "--imu-format); not with --gnss-raw.")]
 ImuArgument = Annotated[Path, typer.Argument(
     help="IMU record (native CSV, PSINS .imu, ...; see --imu-format).")]
 GnssFile = Annotated[Path, typer.Option(
@@ -241,7 +245,7 @@ Seed = Annotated[int, typer.Option("--seed", min=0, help="Random seed (≥ 0): t
 #: options", which tests/test_cli_options.py refuses, so that a new option gets a panel).
 HELP_PANELS = {
     "navigate": {
-        "Inputs": ("imu", "gnss", "map_", "init", "odometer", "mag", "imu_format",
+        "Inputs": ("imu", "gnss", "gnss_raw", "map_", "init", "odometer", "mag", "imu_format",
                    "gnss_format", "gnss_datum", "imu_axes", "imu_mount"),
         "Outputs": ("out", "out_rate", "out_datum", "fix_log", "as_json"),
         "Method": ("method", "smooth", "grade"),

@@ -41,9 +41,20 @@ def read_truth(path) -> Trajectory:
     """Read a truth or solution CSV; velocity and attitude default to NaN when absent.
 
     An RTKLIB solution (``.pos``) is read as a truth too (positions and velocity, no attitude):
-    the usual reference of a drive with RTK; so is a PSINS navigation output (``avp`` CSV)."""
-    if header_of(path)[:1] == (AVP_COLUMNS[0],):
+    the usual reference of a drive with RTK; so is a PSINS navigation output (``avp`` CSV) and a
+    smartLoc ground-truth file (``point3`` lines, ECEF)."""
+    first = header_of(path)[:1]
+    if first == (AVP_COLUMNS[0],):
         return read_avp_csv(path)
+    if first[:1] and first[0].split()[:1] == ["point3"]:
+        from selfnav.earth import ecef_to_geodetic
+        from selfnav.io.smartloc import read_smartloc_truth
+
+        gt = read_smartloc_truth(path)
+        lat, lon, h = ecef_to_geodetic(gt.ecef)
+        n = len(gt.t)
+        return Trajectory(gt.t, lat, lon, h, np.full((n, 3), np.nan), np.full((n, 3, 3), np.nan),
+                          source=str(path))
     if str(path).lower().endswith(".pos"):
         g = read_rtklib_pos(path)
         n = len(g.t)

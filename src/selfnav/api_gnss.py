@@ -1,0 +1,114 @@
+"""Python API of the tightly coupled raw-GNSS navigator (issue 23, part 3; docs/gnss.md):
+:func:`navigate_raw` and its per-satellite log. Re-exported by :mod:`selfnav.api`."""
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from selfnav.errors import InputError, SelfnavError
+from selfnav.solution import Solution
+from selfnav.types import Trajectory
+
+#: What each mixture component is called in the per-satellite log.
+COMPONENT_NAMES = ("los", "multipath", "reflected")
+
+
+def read_raw_with_odometry(path, *, fmt: str = "auto"):
+    """Pseudoranges and the car's odometry (speed, yaw rate) of a raw record that carries both
+    (the smartLoc format: :func:`selfnav.io.smartloc.read_smartloc_input`)."""
+    from selfnav.io.raw_readers import detect_format
+    from selfnav.io.smartloc import read_smartloc_input
+
+    path = Path(path)
+    kind = detect_format(path) if fmt == "auto" else fmt
+    if kind != "smartloc":
+        raise InputError(path, f"this {kind} record has no odometry: navigate --gnss-raw needs the "
+                               "car's speed and yaw rate in the same file (the smartLoc "
+                               "format's odom3 lines); tight coupling with an IMU is not built "
+                               "yet — use `selfnav spp` and navigate --gnss with its fixes")
+    prs, odo = read_smartloc_input(path)
+    if len(odo.t) < 2:
+        raise InputError(path, "has fewer than 2 odom3 lines: no speed and yaw rate to "
+                               "navigate with")
+    return prs, odo
+
+
+def navigate_raw(gnss_raw, *, fmt: str = "auto", smooth: bool = False, config=None,
+                 progress=None) -> Solution:
+    """Tightly coupled navigation from raw pseudoranges and a car's speed and yaw rate
+    (:func:`selfnav.gnss.tight.run_tight`): every satellite judged on its own against a
+    self-tuned mixture of line-of-sight and delayed errors, no heading needed at the start.
+
+    Parameters
+    ----------
+    gnss_raw : path, or a ``(Pseudoranges, Odometry)`` pair
+    fmt : raw format of the file (``"auto"`` or ``"smartloc"``)
+    smooth : RTS smoother (post-processing); otherwise causal
+    config : :class:`selfnav.gnss.tight.TightConfig`, optional; the odometry's noise defaults to
+        the file's own variances (median)
+    progress : callable(done, total), optional
+
+    Returns
+    -------
+    Solution
+        ``method "tight"`` (``"tight+smooth"``), σ per row, ``columns`` heading_deg, speed_scale,
+        yaw_rate_bias_dps, n_sats, n_delayed, clock_m; ``detail`` the
+        :class:`selfnav.gnss.tight.TightResult`.
+    """
+    from selfnav.gnss.tight import TightConfig, run_tight
+
+    if isinstance(gnss_raw, (str, Path)):
+        prs, odo = read_raw_with_odometry(gnss_raw, fmt=fmt)
+        source = str(gnss_raw)
+    else:
+        prs, odo = gnss_raw
+        source = getattr(prs, "source", "")
+    cfg = config or TightConfig()
+    if config is None and getattr(odo, "variances", None) is not None and len(odo.variances):
+        v = np.median(odo.variances, axis=0)
+        if v[0] > 0 and v[5] > 0:
+            cfg = replace(cfg, speed_sigma=float(np.sqrt(v[0])),
+                          yaw_rate_sigma=float(np.sqrt(v[5])))
+    try:
+        r = run_tight(prs, odo, cfg, smooth=smooth, progress=progress)
+    except np.linalg.LinAlgError as e:
+        raise SelfnavError(f"{source}: the tightly coupled filter failed numerically ({e})") \
+            from None
+    n = len(r.t)
+    traj = Trajectory(r.t, r.lat, r.lon, r.h, np.full((n, 3), np.nan),
+                      np.full((n, 3, 3), np.nan), source=f"selfnav tight {source}")
+    sig = np.column_stack([r.sigma_e, r.sigma_n, np.full(n, np.nan)])
+    cols = {"sigma_h_m": r.sigma_h, "heading_deg": np.degrees(r.heading),
+            "speed_scale": r.scale, "yaw_rate_bias_dps": np.degrees(r.yaw_bias),
+            "n_sats": r.n_sats, "n_delayed": r.n_reflected, "clock_m": r.clock}
+    stats = {**r.stats, "source": source, "smoothed": r.smoothed,
+             "median_sigma_h_m": float(np.median(r.sigma_h))}
+    return Solution(traj, sig, cols, stats, "tight+smooth" if smooth else "tight", (r, prs))
+
+
+def write_tight_log(path, solution: Solution):
+    """One row per pseudorange of a :func:`navigate_raw` solution: ``t, system, sat, cn0_dbhz,
+    elevation_deg, residual_m`` (at the output state), ``component`` (los, multipath,
+    reflected; ``-`` where the epoch had no output) — written atomically."""
+    from selfnav.io.csvio import write_csv
+    from selfnav.io.smartloc import SYSTEM_NAMES
+
+    r, prs = solution.detail
+    comp = np.array([COMPONENT_NAMES[c] if 0 <= c < len(COMPONENT_NAMES) else
+                     (f"delayed{c}" if c > 0 else "-") for c in r.obs_component.tolist()],
+                    dtype=object)
+    system = np.array([SYSTEM_NAMES.get(int(s), str(int(s))) for s in prs.system.tolist()],
+                      dtype=object)
+    order = np.argsort(prs.t, kind="stable")
+    return write_csv(path, {"t": prs.t[order], "system": system[order],
+                            "sat": prs.sat_id[order].astype(int),
+                            "cn0_dbhz": prs.cn0[order],
+                            "elevation_deg": np.degrees(prs.elevation[order]),
+                            "residual_m": r.obs_residual[order], "component": comp[order]},
+                     fmt={"t": "%.3f", "cn0_dbhz": "%.1f", "elevation_deg": "%.2f",
+                          "residual_m": "%.3f"})
+
+
+__all__ = ["navigate_raw", "write_tight_log", "read_raw_with_odometry"]

@@ -1,0 +1,586 @@
+"""Tightly coupled odometry + pseudorange filter with a self-tuning NLOS mixture (issue 23, part 3,
+"with wheel speed and yaw rate instead of an IMU").
+
+The car's speed and yaw rate propagate a planar dead reckoning (:mod:`selfnav.gnss.odometry`,
+(1)–(2)); every pseudorange updates it **one satellite at a time in one joint update**, so a
+street with two or three satellites still corrects the position, and each satellite is judged
+on its own.
+
+State (tangent plane at ``origin``)::
+
+    x = [E, N, U, H, s, b, c, d, c_2 … c_k]     position (m), heading H (rad, clockwise from
+                                                North), speed scale s, yaw-rate bias b (rad/s),
+                                                receiver clock c (m, first system), clock drift
+                                                d (m/s), clock offsets of the other systems (m)
+
+Pseudorange of satellite i (system j), with the Earth-rotation term of
+:func:`selfnav.gnss.models.pseudorange_model`::
+
+    ρ_i = |r_i − r| + ω_e/c (x_i y − y_i x) + c + c_j + e_i                                    (1)
+
+**The error e_i is a mixture** (an urban canyon's reflected signals arrive late: their error is
+positive and large)::
+
+    p(e | C/N0) = (1 − π(C/N0)) N(0, σ_L(C/N0)²) + π(C/N0) N(μ_R, σ_R²),
+    σ_L(C/N0) = σ_L45 · 10^((45 − C/N0)/20)                                                 (2)
+
+Each epoch's update is a max-mixture iterated EKF: every satellite takes the component that
+explains its residual best at the current estimate (with the prior's spread on the first pass),
+the update is redone from the prior until the choice settles. The mixture's parameters
+(σ_L45, μ_R, σ_R and π per C/N0 band) are **tuned on the fly** by expectation-maximisation over
+the post-fit residuals of the last ``tune_window`` seconds — causal: an epoch's model was fitted
+on earlier epochs only.
+
+**Heading at the start** is not needed: a bank of ``n_heading`` filters spaced evenly around the
+circle runs until the pseudoranges' likelihood leaves one (posterior ``> 1 − bank_p``, or the last
+survivor); until then the output is the most probable one. Position, clocks and height start from
+the first epoch's least squares (:func:`selfnav.gnss.spp.solve_spp`).
+
+The RTS smoother (``smooth=True``) runs over the chosen filter's stored epochs and then
+re-decides each satellite's component on the smoothed track and smooths again (``smooth_passes``).
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from selfnav.earth import enu_rotation, enu_to_geodetic, geodetic_to_ecef
+from selfnav.errors import SelfnavError
+from selfnav.gnss.models import C_LIGHT, OMEGA_EARTH
+
+IE, IN, IU, IH, IS, IB, IC, ID, IZ = range(9)
+_CN0_EDGES = np.array([25.0, 30.0, 35.0, 40.0, 45.0])       # C/N0 bands of π (dBHz)
+_LOG_2PI = math.log(2.0 * math.pi)
+_SIN_MASK = math.sin(math.radians(5.0))
+
+
+@dataclass
+class MixtureModel:
+    """Pseudorange error model (2): component 0 is the line of sight (mean 0, σ_L45 at 45 dBHz,
+    scaled with C/N0), components 1… are delayed signals (multipath, reflections; mean and σ
+    each); ``weights`` (6, K) the components' shares per C/N0 band (below 25, 25–30, …, 45 and
+    above)."""
+
+    sigma_los45: float = 3.0
+    means: np.ndarray = field(default_factory=lambda: np.array([8.0, 40.0]))
+    sigmas: np.ndarray = field(default_factory=lambda: np.array([6.0, 40.0]))
+    weights: np.ndarray = field(default_factory=lambda: np.array(
+        [[0.2, 0.3, 0.5], [0.3, 0.3, 0.4], [0.4, 0.3, 0.3], [0.5, 0.3, 0.2], [0.7, 0.2, 0.1],
+         [0.9, 0.07, 0.03]]))
+    sigma_los_min: float = 1.0
+    sigma_los_max: float = 60.0
+
+    def copy(self):
+        return MixtureModel(self.sigma_los45, self.means.copy(), self.sigmas.copy(),
+                            self.weights.copy(), self.sigma_los_min, self.sigma_los_max)
+
+    def sigma_los(self, cn0):
+        s = self.sigma_los45 * 10.0 ** ((45.0 - np.asarray(cn0, float)) / 20.0)
+        return np.clip(s, self.sigma_los_min, self.sigma_los_max)
+
+    def components(self, cn0):
+        """(weights, means, variances), each (n, K): column 0 line of sight, 1… delayed."""
+        cn0 = np.asarray(cn0, float)
+        w = np.clip(self.weights[np.searchsorted(_CN0_EDGES, cn0, side="right")], 1e-3, 1.0)
+        sl = self.sigma_los(cn0)
+        n = len(sl)
+        mu = np.column_stack([np.zeros(n)] + [np.full(n, m) for m in self.means])
+        var = np.column_stack([sl * sl] + [np.full(n, s * s) for s in self.sigmas])
+        return w, mu, var
+
+    def fit(self, e, cn0, iters: int = 8, prior_count: float = 20.0):
+        """EM on post-fit residuals ``e`` (m) with their C/N0: updates the model in place.
+        ``prior_count`` pseudo-observations per band keep a sparse band's shares near theirs."""
+        e = np.asarray(e, float)
+        cn0 = np.asarray(cn0, float)
+        if e.size < 50:
+            return self
+        band = np.searchsorted(_CN0_EDGES, cn0, side="right")
+        scale = 10.0 ** ((45.0 - cn0) / 20.0)
+        w0 = self.weights.copy()
+        K = w0.shape[1]
+        for _ in range(iters):
+            w, mu, var = self.components(cn0)
+            ll = np.log(w) - 0.5 * (np.log(var) + (e[:, None] - mu) ** 2 / var)
+            ll -= ll.max(1, keepdims=True)
+            g = np.exp(ll)
+            g /= g.sum(1, keepdims=True)
+            s2 = np.sum(g[:, 0] * (e / scale) ** 2) / max(np.sum(g[:, 0]), 1e-9)
+            self.sigma_los45 = float(np.clip(np.sqrt(s2), 0.5, 15.0))
+            lo = 0.0
+            for k in range(1, K):
+                nk = max(np.sum(g[:, k]), 1e-9)
+                m = float(np.clip(np.sum(g[:, k] * e) / nk, lo + 1.0, 300.0))
+                self.means[k - 1] = m
+                self.sigmas[k - 1] = float(np.clip(np.sqrt(np.sum(g[:, k] * (e - m) ** 2) / nk),
+                                                   2.0, 300.0))
+                lo = m
+            cnt = np.bincount(band, minlength=6).astype(float)[:, None]
+            got = np.column_stack([np.bincount(band, weights=g[:, k], minlength=6)
+                                   for k in range(K)])
+            self.weights = (got + prior_count * w0) / (cnt + prior_count)
+        return self
+
+
+@dataclass
+class TightConfig:
+    """Noise model and options of :class:`TightOdometryFilter` (SI units, radians)."""
+
+    speed_sigma: float = 0.05               # m/s, white
+    yaw_rate_sigma: float = 0.002           # rad/s, white
+    scale_sigma0: float = 0.02              # a car's wheel-speed scale
+    scale_rw: float = 1e-4                  # 1/√s
+    bias_sigma0: float = math.radians(0.2)  # rad/s, a car's yaw-rate sensor
+    bias_rw: float = 1e-5                   # rad/s/√s
+    pos_rw: float = 0.1                     # m/√s, slip and the planar model
+    height_rw: float = 0.05                 # m/√s, a road's height changes slowly
+    clock_phase_rw: float = 0.5             # m/√s
+    clock_drift_rw: float = 1.0             # m/s/√s
+    isb_rw: float = 0.01                    # m/√s, inter-system clock offsets
+    drift_sigma0: float = 200.0             # m/s
+    position_sigma0: float = 30.0           # m, around the first least-squares fix
+    n_heading: int = 12
+    bank_p: float = 1e-3                    # a hypothesis below this posterior is dropped
+    iterations: int = 4
+    tune_window: float = 60.0               # s of post-fit residuals for the mixture's EM
+    tune_every: float = 5.0                 # s
+    mixture: MixtureModel = field(default_factory=MixtureModel)
+    smooth_passes: int = 2
+    zenith_sigma0: float = 3.0              # m, residual zenith delay state (0: off)
+    zenith_rw: float = 0.0                  # m/√s
+
+
+def _sagnac_range(r, sat):
+    """Range (1) without clocks from receiver ECEF ``r`` (3,) to satellites (n, 3); unit rows."""
+    d = sat - r
+    rng = np.sqrt(np.einsum("ij,ij->i", d, d))
+    k = OMEGA_EARTH / C_LIGHT
+    rho = rng + k * (sat[:, 0] * r[1] - sat[:, 1] * r[0])
+    g = np.empty_like(d)
+    g[:, 0] = -d[:, 0] / rng - k * sat[:, 1]
+    g[:, 1] = -d[:, 1] / rng + k * sat[:, 0]
+    g[:, 2] = -d[:, 2] / rng
+    return rho, g
+
+
+class TightOdometryFilter:
+    """One hypothesis of the tightly coupled filter: ``predict(v, ω, dt)``, ``update(...)``.
+
+    After ``update`` the object holds ``x, P``, the satellites' ``residual`` (post-fit, m),
+    ``component`` (0 line of sight, 1… delayed), the epoch's ``log_likelihood``, and ``P_report``:
+    the covariance the same gains give when each satellite's error is correlated in time
+    (:func:`correlation_inflation`) — the σ it reports.
+    """
+
+    def __init__(self, x0, P0, origin_ecef, C_en, systems, cfg: TightConfig):
+        self.x = np.array(x0, float)
+        self.P = np.array(P0, float)
+        self.P_report = self.P.copy()
+        self.n = len(self.x)
+        self.r0 = np.asarray(origin_ecef, float)
+        self.C_ne = np.asarray(C_en, float).T                 # ENU -> ECEF
+        self.systems = list(systems)
+        self.cfg = cfg
+        self.residual = np.empty(0)
+        self.component = np.empty(0, int)
+        self.log_likelihood = 0.0
+        self.history = []
+        self.init_args = (self.x.copy(), self.P.copy(), origin_ecef, C_en, systems, cfg)
+
+    # --- propagation: seed odometry (1)-(2) and the clock -----------------------------------
+    def predict(self, v, w, dt):
+        cfg, x = self.cfg, self.x
+        H, s, b = x[IH], x[IS], x[IB]
+        hd = -(w - b)
+        Hm = H + 0.5 * dt * hd
+        sH, cH = math.sin(Hm), math.cos(Hm)
+        d = s * v * dt
+        n = self.n
+        F = np.eye(n)
+        F[IE, IH], F[IN, IH] = d * cH, -d * sH
+        F[IE, IS], F[IN, IS] = v * dt * sH, v * dt * cH
+        F[IE, IB], F[IN, IB] = 0.5 * dt * d * cH, -0.5 * dt * d * sH
+        F[IH, IB] = dt
+        F[IC, ID] = dt
+        G = np.zeros((n, 2))
+        G[IE, 0], G[IN, 0] = s * dt * sH, s * dt * cH
+        G[IE, 1], G[IN, 1] = -0.5 * dt * d * cH, 0.5 * dt * d * sH
+        G[IH, 1] = -dt
+        x[IE] += d * sH
+        x[IN] += d * cH
+        x[IH] += dt * hd
+        x[IC] += dt * x[ID]
+        q = np.zeros(n)
+        q[IE] = q[IN] = cfg.pos_rw ** 2 * dt
+        q[IU] = cfg.height_rw ** 2 * dt
+        q[IS] = cfg.scale_rw ** 2 * dt
+        q[IB] = cfg.bias_rw ** 2 * dt
+        q[IC] = cfg.clock_phase_rw ** 2 * dt
+        q[ID] = cfg.clock_drift_rw ** 2 * dt
+        q[IZ] = cfg.zenith_rw ** 2 * dt
+        q[IZ + 1:] = cfg.isb_rw ** 2 * dt
+        Q = G @ np.diag([cfg.speed_sigma ** 2, cfg.yaw_rate_sigma ** 2]) @ G.T + np.diag(q)
+        self.P = F @ self.P @ F.T + Q
+        self.P_report = F @ self.P_report @ F.T + Q
+        return F
+
+    # --- the pseudorange model (1) at a state -----------------------------------------------
+    def _model(self, x, sat, sys_idx):
+        r = self.r0 + self.C_ne @ x[IE:IU + 1]
+        rho, g = _sagnac_range(r, sat)
+        Hm = np.zeros((len(rho), self.n))
+        Hm[:, IE:IU + 1] = g @ self.C_ne
+        Hm[:, IC] = 1.0
+        # a zenith delay left by the atmosphere models, mapped by 1/sin(elevation)
+        Hm[:, IZ] = 1.0 / np.maximum(-Hm[:, IU], _SIN_MASK)
+        clk = x[IC] + Hm[:, IZ] * x[IZ]
+        for j in range(1, len(self.systems)):
+            m = sys_idx == j
+            Hm[m, IZ + j] = 1.0
+            clk[m] += x[IZ + j]
+        return rho + clk, Hm
+
+    def update(self, pr, sat, sys_idx, cn0, mixture: MixtureModel | None = None, *,
+               components=None, inflation=1.0):
+        """Max-mixture iterated update with one epoch's pseudoranges (module docstring);
+        ``components`` (0, 1, … per satellite) fixes the choice instead (the smoother's
+        re-pass); ``inflation`` multiplies R in ``P_report`` only."""
+        cfg = self.cfg
+        mix = mixture or cfg.mixture
+        xp, Pp = self.x.copy(), self.P
+        w, mu, var = mix.components(cn0)
+        logw = np.log(w)
+        rows = np.arange(len(pr))
+        xj, comp, P = xp, None, Pp
+        for it in range(cfg.iterations if components is None else 1):
+            h, Hm = self._model(xj, sat, sys_idx)
+            e = pr - h
+            if components is None:
+                spread = np.einsum("ij,jk,ik->i", Hm, Pp if it == 0 else P, Hm)
+                tot = var + spread[:, None]
+                ll = logw - 0.5 * (np.log(tot) + (e[:, None] - mu) ** 2 / tot)
+                new = np.argmax(ll, axis=1)
+            else:
+                new = np.asarray(components, int)
+            if comp is not None and np.array_equal(new, comp):
+                break
+            comp = new
+            R = var[rows, comp]
+            innov = e - mu[rows, comp] - Hm @ (xp - xj)
+            PHt = Pp @ Hm.T
+            S = Hm @ PHt + np.diag(R)
+            K = np.linalg.solve(S, PHt.T).T
+            xj = xp + K @ innov
+            IKH = np.eye(self.n) - K @ Hm
+            P = IKH @ Pp @ IKH.T + (K * R) @ K.T
+            if it == 0:
+                _, logdet = np.linalg.slogdet(S)
+                self.log_likelihood = float(-0.5 * (innov @ np.linalg.solve(S, innov) + logdet
+                                                    + len(pr) * _LOG_2PI)
+                                            + np.sum(logw[rows, comp]))
+        self.x, self.P = xj, 0.5 * (P + P.T)
+        Pr = IKH @ self.P_report @ IKH.T + (K * (R * inflation)) @ K.T
+        self.P_report = 0.5 * (Pr + Pr.T)
+        h, _ = self._model(self.x, sat, sys_idx)
+        self.residual = pr - h
+        self.component = comp
+        return self
+
+
+@dataclass
+class TightResult:
+    """Per epoch: ``t``, ``east, north, up`` (tangent plane at ``origin`` = (lat, lon, h)),
+    ``lat, lon, h``, ``heading`` (rad), ``scale``, ``yaw_bias`` (rad/s), ``sigma_e, sigma_n``, ``n_sats``, ``n_reflected`` (the
+    satellites given a delayed component), ``clock`` (m), ``smoothed``; ``stats`` (dict); per input
+    pseudorange ``obs_residual`` (m, at the output state) and ``obs_component``."""
+
+    t: np.ndarray
+    east: np.ndarray
+    north: np.ndarray
+    up: np.ndarray
+    lat: np.ndarray
+    lon: np.ndarray
+    h: np.ndarray
+    heading: np.ndarray
+    scale: np.ndarray
+    yaw_bias: np.ndarray
+    sigma_e: np.ndarray
+    sigma_n: np.ndarray
+    n_sats: np.ndarray
+    n_reflected: np.ndarray
+    clock: np.ndarray
+    origin: tuple
+    smoothed: bool = False
+    stats: dict = field(default_factory=dict)
+    obs_residual: np.ndarray | None = None     # (M,) m, per input pseudorange (NaN: not used)
+    obs_component: np.ndarray | None = None    # (M,) 0 line of sight, 1… delayed, −1 not used
+
+    @property
+    def sigma_h(self):
+        return np.hypot(self.sigma_e, self.sigma_n)
+
+
+class ResidualCorrelation:
+    """Lag-one correlation ρ of each satellite's line-of-sight residuals between consecutive
+    epochs (scaled by σ_L, pooled over satellites, forgotten with time constant ``window``), and
+    the variance inflation ``(1 + ρ)/(1 − ρ)`` of averaging an AR(1) series: what the filter's
+    white-noise covariance misses when it averages correlated errors."""
+
+    def __init__(self, window: float, max_gap: float, max_inflation: float = 100.0):
+        self.window, self.max_gap, self.max_inflation = window, max_gap, max_inflation
+        self.last = {}
+        self.sxy = self.sxx = self.syy = 0.0
+        self.t = None
+        self.inflation = 1.0
+
+    def add(self, t, keys, z, los):
+        if self.t is not None:
+            f = math.exp(-(t - self.t) / self.window)
+            self.sxy *= f
+            self.sxx *= f
+            self.syy *= f
+        self.t = t
+        for k, v, ok in zip(keys.tolist(), z.tolist(), los.tolist()):
+            prev = self.last.get(k)
+            if ok and prev is not None and t - prev[0] <= self.max_gap:
+                self.sxy += prev[1] * v
+                self.sxx += prev[1] * prev[1]
+                self.syy += v * v
+            self.last[k] = (t, v) if ok else None
+        if self.sxx > 0 and self.syy > 0:
+            rho = min(max(self.sxy / math.sqrt(self.sxx * self.syy), 0.0), 0.999)
+            self.inflation = min((1 + rho) / (1 - rho), self.max_inflation)
+        return self.inflation
+
+
+def _epochs(t_obs):
+    order = np.argsort(t_obs, kind="stable")
+    t_ep, first = np.unique(t_obs[order], return_index=True)
+    bounds = np.append(first, len(order))
+    return t_ep, order, bounds
+
+
+def _first_fix(prs, idx, systems):
+    """Least-squares position and clocks of one epoch (C/N0 weights, exclusion), or None."""
+    from selfnav.gnss.spp import SppConfig, solve_spp
+
+    sp = solve_spp(prs.t[idx], prs.pr[idx], prs.var[idx], prs.sat_ecef[idx], prs.system[idx],
+                   prs.elevation[idx], prs.cn0[idx], SppConfig(weighting="cn0"))
+    if not np.isfinite(sp.lat[0]):
+        return None
+    clocks = np.zeros(len(systems))
+    have = dict(zip(sp.systems.tolist(), sp.clock[0].tolist()))
+    ref = have.get(systems[0], np.nan)
+    for j, s in enumerate(systems):
+        c = have.get(s, np.nan)
+        clocks[j] = c if np.isfinite(c) else (ref if np.isfinite(ref) else 0.0)
+    if not np.isfinite(clocks[0]):
+        clocks[0] = np.nanmean([v for v in have.values()])
+    return sp.lat[0], sp.lon[0], sp.h[0], clocks
+
+
+def run_tight(prs, odo, cfg: TightConfig | None = None, *, smooth: bool = False,
+              heading0=None, progress=None) -> TightResult:
+    """Run the tightly coupled filter over a record: pseudoranges ``prs``
+    (:class:`selfnav.io.smartloc.Pseudoranges`) and odometry ``odo``
+    (:class:`selfnav.io.smartloc.Odometry`: speed and yaw rate).
+
+    One output row per pseudorange epoch from the first one with a least-squares fix. Causal
+    unless ``smooth`` (the RTS smoother of the module docstring). ``heading0 = (H, σ_H)`` (rad,
+    clockwise from North) replaces the heading bank with one filter.
+    """
+    cfg = cfg or TightConfig()
+    t0_wall = time.perf_counter()
+    t_ep, order, bounds = _epochs(np.asarray(prs.t, float))
+    systems = np.unique(prs.system).tolist()
+    sys_of = {s: j for j, s in enumerate(systems)}
+    sys_idx_all = np.array([sys_of[s] for s in prs.system.tolist()], int)
+    if len(odo.t) < 2:
+        raise SelfnavError("the odometry has fewer than 2 samples")
+    # the start: the first epoch with a least-squares fix
+    k0, fix = 0, None
+    while k0 < len(t_ep) and fix is None:
+        idx = order[bounds[k0]:bounds[k0 + 1]]
+        fix = _first_fix(prs, idx, systems) if len(idx) >= 3 + len(systems) else None
+        k0 += fix is None
+    if fix is None:
+        raise SelfnavError("no epoch has enough pseudoranges for a first fix")
+    lat0, lon0, h0, clocks = fix
+    origin = (float(lat0), float(lon0), float(h0))
+    r0 = geodetic_to_ecef(lat0, lon0, h0)
+    C_en = enu_rotation(lat0, lon0)
+    nsys = len(systems)
+    n = IZ + nsys
+    keys_all = np.asarray(prs.system, np.int64) * 1000 + np.asarray(prs.sat_id, np.int64)
+    x0 = np.zeros(n)
+    x0[IS] = 1.0
+    x0[IC] = clocks[0]
+    x0[IZ + 1:] = clocks[1:] - clocks[0]
+    P0 = np.diag(np.r_[[cfg.position_sigma0 ** 2] * 3, [0.0], cfg.scale_sigma0 ** 2,
+                       cfg.bias_sigma0 ** 2, cfg.position_sigma0 ** 2, cfg.drift_sigma0 ** 2,
+                       cfg.zenith_sigma0 ** 2, [cfg.position_sigma0 ** 2] * (nsys - 1)])
+    if heading0 is None:
+        spacing = 2 * math.pi / cfg.n_heading
+        starts = [(i * spacing, spacing / 2) for i in range(cfg.n_heading)]
+    else:
+        starts = [tuple(heading0)]
+    bank = []
+    for h_start, h_sigma in starts:
+        x = x0.copy()
+        x[IH] = h_start
+        P = P0.copy()
+        P[IH, IH] = h_sigma ** 2
+        bank.append(TightOdometryFilter(x, P, r0, C_en, systems, cfg))
+    logw = np.zeros(len(bank))
+    mix = cfg.mixture.copy()
+    tune_e, tune_c, tune_t = [], [], []
+    dt_med = float(np.median(np.diff(t_ep))) if len(t_ep) > 1 else 1.0
+    corr = ResidualCorrelation(cfg.tune_window, 2.5 * dt_med)
+    next_tune = t_ep[k0] + cfg.tune_every
+    speed, yaw_rate = np.asarray(odo.speed, float), np.asarray(odo.yaw_rate, float)
+    K = len(t_ep) - k0
+    out = {k: np.full(K, np.nan) for k in ("E", "N", "U", "H", "S", "B", "sE", "sN", "clk")}
+    n_sats = np.zeros(K, int)
+    n_refl = np.zeros(K, int)
+    infl = np.ones(K)
+    M = len(prs.t)
+    obs_res = np.full(M, np.nan)
+    obs_comp = np.full(M, -1, int)
+    t_prev = t_ep[k0]
+    for j, k in enumerate(range(k0, len(t_ep))):
+        t = t_ep[k]
+        idx = order[bounds[k]:bounds[k + 1]]
+        steps = []
+        if j:
+            # zero-order hold of the odometry sample in effect, stepping at each odometry sample
+            ts = odo.t[(odo.t > t_prev) & (odo.t < t)]
+            for a, b in zip(np.r_[t_prev, ts], np.r_[ts, t]):
+                i_od = max(int(np.searchsorted(odo.t, a, side="right")) - 1, 0)
+                steps.append((speed[i_od], yaw_rate[i_od], b - a))
+        for f in bank:
+            F = np.eye(f.n)
+            for v, w, dt in steps:
+                F = f.predict(v, w, dt) @ F
+            xprior, Pprior = f.x.copy(), f.P.copy()
+            f.update(prs.pr[idx], prs.sat_ecef[idx], sys_idx_all[idx], prs.cn0[idx], mix,
+                     inflation=corr.inflation)
+            f.history.append((t, xprior, Pprior, f.x.copy(), f.P.copy(), F, idx,
+                              f.component.copy(), steps, f.P_report.copy(), corr.inflation))
+        if len(bank) > 1:
+            logw += np.array([f.log_likelihood for f in bank])
+            logw -= logw.max()
+            post = np.exp(logw)
+            post /= post.sum()
+            keep = post >= cfg.bank_p
+            bank = [f for f, kp in zip(bank, keep) if kp]
+            logw = logw[keep]
+        best = bank[int(np.argmax(logw))]
+        x, P = best.x, best.P_report
+        out["E"][j], out["N"][j], out["U"][j] = x[IE], x[IN], x[IU]
+        out["H"][j] = x[IH] % (2 * math.pi)
+        out["sE"][j], out["sN"][j] = math.sqrt(P[IE, IE]), math.sqrt(P[IN, IN])
+        out["clk"][j] = x[IC]
+        out["S"][j], out["B"][j] = x[IS], x[IB]
+        n_sats[j] = len(idx)
+        obs_res[idx], obs_comp[idx] = best.residual, best.component
+        n_refl[j] = int(np.sum(best.component >= 1))
+        infl[j] = corr.add(t, keys_all[idx], best.residual / mix.sigma_los(prs.cn0[idx]),
+                           best.component == 0)
+        # the mixture learns from the chosen filter's post-fit residuals (causal)
+        tune_e.append(best.residual)
+        tune_c.append(prs.cn0[idx])
+        tune_t.append(np.full(len(idx), t))
+        if t >= next_tune:
+            te = np.concatenate(tune_t)
+            m = te > t - cfg.tune_window
+            mix.fit(np.concatenate(tune_e)[m], np.concatenate(tune_c)[m])
+            keep_from = int(np.searchsorted([a[0] for a in tune_t], t - cfg.tune_window))
+            del tune_e[:keep_from], tune_c[:keep_from], tune_t[:keep_from]
+            next_tune = t + cfg.tune_every
+        t_prev = t
+        if progress is not None:
+            progress(j + 1, K)
+    final = bank[int(np.argmax(logw))]
+    stats = {"epochs": int(K), "start_epoch_t": float(t_ep[k0]), "systems": systems,
+             "bank_left": len(bank), "mixture": {"sigma_los45": mix.sigma_los45,
+                                                 "means": mix.means.tolist(),
+                                                 "sigmas": mix.sigmas.tolist(),
+                                                 "weights": mix.weights.round(3).tolist()},
+             "reflected_share": float(n_refl.sum() / max(n_sats.sum(), 1)),
+             "inflation_median": float(np.median(infl))}
+    smoothed = False
+    if smooth:
+        X, Ps, hist = _smooth(final, prs, sys_idx_all, mix, cfg)
+        for k, hh in enumerate(hist):
+            idx = hh[6]
+            hx, _ = final._model(X[k], prs.sat_ecef[idx], sys_idx_all[idx])
+            obs_res[idx], obs_comp[idx] = prs.pr[idx] - hx, hh[7]
+        n_refl = np.array([int(np.sum(hh[7] >= 1)) for hh in hist])
+        out["E"], out["N"], out["U"] = X[:, IE], X[:, IN], X[:, IU]
+        out["H"] = X[:, IH] % (2 * math.pi)
+        # the smoother averages the same correlated errors: its covariance takes the inflation
+        out["sE"] = np.sqrt(Ps[:, IE, IE] * infl)
+        out["sN"] = np.sqrt(Ps[:, IN, IN] * infl)
+        out["clk"] = X[:, IC]
+        out["S"], out["B"] = X[:, IS], X[:, IB]
+        smoothed = True
+    enu = np.column_stack([out["E"], out["N"], out["U"]])
+    lat, lon, h = enu_to_geodetic(enu, *origin)
+    stats["runtime_s"] = time.perf_counter() - t0_wall
+    return TightResult(t_ep[k0:], out["E"], out["N"], out["U"], np.asarray(lat), np.asarray(lon),
+                       np.asarray(h), out["H"], out["S"], out["B"], out["sE"], out["sN"], n_sats,
+                       n_refl, out["clk"], origin, smoothed, stats, obs_res, obs_comp)
+
+
+def _rts(hist):
+    """RTS smoother over stored (t, x⁻, P⁻, x⁺, P⁺, F, …) epochs; heading differences wrapped."""
+    K = len(hist)
+    X = np.array([h[3] for h in hist])
+    Ps = np.array([h[4] for h in hist])
+    for k in range(K - 2, -1, -1):
+        xf, Pf = hist[k][3], hist[k][4]
+        xp1, Pp1, F1 = hist[k + 1][1], hist[k + 1][2], hist[k + 1][5]
+        # a state held at zero variance (an unused slot, a switched-off state) gains nothing
+        C = np.linalg.solve(Pp1.T + 1e-9 * np.eye(len(Pp1)), (Pf @ F1.T).T).T
+        dx = X[k + 1] - xp1
+        dx[IH] = (dx[IH] + math.pi) % (2 * math.pi) - math.pi
+        X[k] = xf + C @ dx
+        Ps[k] = Pf + C @ (Ps[k + 1] - Pp1) @ C.T
+    return X, Ps
+
+
+def _redo(filt: TightOdometryFilter, hist, X, Ps, prs, sys_idx_all, mix):
+    """The forward pass over stored epochs ``hist`` again, each satellite's component decided
+    on the smoothed track ``X, Ps`` instead of the running estimate. Returns (new hist, filter)."""
+    f = TightOdometryFilter(*filt.init_args)
+    new = []
+    for k, h in enumerate(hist):
+        t, idx, steps, infl = h[0], h[6], h[8], h[10]
+        F = np.eye(f.n)
+        for v, w, dt in steps:
+            F = f.predict(v, w, dt) @ F
+        sat, si = prs.sat_ecef[idx], sys_idx_all[idx]
+        hx, Hm = f._model(X[k], sat, si)
+        e = prs.pr[idx] - hx
+        wgt, mu, var = mix.components(prs.cn0[idx])
+        tot = var + np.einsum("ij,jk,ik->i", Hm, Ps[k], Hm)[:, None]
+        comp = np.argmax(np.log(wgt) - 0.5 * (np.log(tot) + (e[:, None] - mu) ** 2 / tot), 1)
+        xprior, Pprior = f.x.copy(), f.P.copy()
+        f.update(prs.pr[idx], sat, si, prs.cn0[idx], mix, components=comp, inflation=infl)
+        new.append((t, xprior, Pprior, f.x.copy(), f.P.copy(), F, idx, comp, steps,
+                    f.P_report.copy(), infl))
+    return new, f
+
+
+def _smooth(filt: TightOdometryFilter, prs, sys_idx_all, mix, cfg):
+    """RTS, then each satellite's component re-decided on the smoothed track and the forward
+    pass and RTS redone with those components fixed (``cfg.smooth_passes`` in all)."""
+    hist = filt.history
+    X, Ps = _rts(hist)
+    for _ in range(cfg.smooth_passes - 1):
+        hist, _ = _redo(filt, hist, X, Ps, prs, sys_idx_all, mix)
+        X, Ps = _rts(hist)
+    return X, Ps, hist
