@@ -49,6 +49,7 @@ import numpy as np
 
 from selfnav.earth import enu_rotation, enu_to_geodetic, geodetic_to_ecef
 from selfnav.errors import SelfnavError
+from selfnav.gnss.guard import DriftGuard, GuardConfig
 from selfnav.gnss.models import C_LIGHT, OMEGA_EARTH
 
 IE, IN, IU, IH, IS, IB, IC, ID, IZ = range(9)
@@ -144,11 +145,13 @@ class TightConfig:
     position_sigma0: float = 30.0           # m, around the first least-squares fix
     n_heading: int = 12
     bank_p: float = 1e-3                    # a hypothesis below this posterior is dropped
+    bank_merge: float = math.radians(3.0)   # headings this close are one hypothesis
     iterations: int = 4
     tune_window: float = 60.0               # s of post-fit residuals for the mixture's EM
     tune_every: float = 5.0                 # s
     mixture: MixtureModel = field(default_factory=MixtureModel)
     smooth_passes: int = 2
+    guard: GuardConfig | None = field(default_factory=GuardConfig)   # None: no drift guard
     zenith_sigma0: float = 3.0              # m, residual zenith delay state (0: off)
     zenith_rw: float = 0.0                  # m/√s
 
@@ -188,7 +191,25 @@ class TightOdometryFilter:
         self.component = np.empty(0, int)
         self.log_likelihood = 0.0
         self.history = []
+        self.nd = None                                        # first drift state (a branch)
         self.init_args = (self.x.copy(), self.P.copy(), origin_ecef, C_en, systems, cfg)
+
+    def branch(self, drift_sigma: float):
+        """A copy (no history) that also explains the GNSS by a common drift: four states at
+        the end, the offset ``d`` (E, N, m; 0 now) every pseudorange sees and its rate (prior
+        σ ``drift_sigma`` m/s): ρ is computed at ``p + d`` (:mod:`selfnav.gnss.guard`)."""
+        n = self.n
+        x = np.r_[self.x, np.zeros(4)]
+        P = np.zeros((n + 4, n + 4))
+        P[:n, :n] = self.P
+        P[n + 2, n + 2] = P[n + 3, n + 3] = drift_sigma ** 2
+        b = TightOdometryFilter(x, P, *self.init_args[2:])
+        Pr = P.copy()
+        Pr[:n, :n] = self.P_report
+        b.P_report = Pr
+        b.nd = n
+        b.drift_rw = self.cfg.guard.drift_rw
+        return b
 
     # --- propagation: seed odometry (1)-(2) and the clock -----------------------------------
     def predict(self, v, w, dt):
@@ -221,7 +242,12 @@ class TightOdometryFilter:
         q[IC] = cfg.clock_phase_rw ** 2 * dt
         q[ID] = cfg.clock_drift_rw ** 2 * dt
         q[IZ] = cfg.zenith_rw ** 2 * dt
-        q[IZ + 1:] = cfg.isb_rw ** 2 * dt
+        q[IZ + 1:IZ + len(self.systems)] = cfg.isb_rw ** 2 * dt
+        nd = self.nd
+        if nd is not None:                                    # the drift branch's d, ḋ
+            F[nd, nd + 2] = F[nd + 1, nd + 3] = dt
+            x[nd:nd + 2] += dt * x[nd + 2:nd + 4]
+            q[nd + 2:nd + 4] = self.drift_rw ** 2 * dt
         Q = G @ np.diag([cfg.speed_sigma ** 2, cfg.yaw_rate_sigma ** 2]) @ G.T + np.diag(q)
         self.P = F @ self.P @ F.T + Q
         self.P_report = F @ self.P_report @ F.T + Q
@@ -229,10 +255,14 @@ class TightOdometryFilter:
 
     # --- the pseudorange model (1) at a state -----------------------------------------------
     def _model(self, x, sat, sys_idx):
-        r = self.r0 + self.C_ne @ x[IE:IU + 1]
-        rho, g = _sagnac_range(r, sat)
+        p = x[IE:IU + 1].copy()
+        if self.nd is not None:
+            p[:2] += x[self.nd:self.nd + 2]
+        rho, g = _sagnac_range(self.r0 + self.C_ne @ p, sat)
         Hm = np.zeros((len(rho), self.n))
         Hm[:, IE:IU + 1] = g @ self.C_ne
+        if self.nd is not None:
+            Hm[:, self.nd:self.nd + 2] = Hm[:, IE:IN + 1]
         Hm[:, IC] = 1.0
         # a zenith delay left by the atmosphere models, mapped by 1/sin(elevation)
         Hm[:, IZ] = 1.0 / np.maximum(-Hm[:, IU], _SIN_MASK)
@@ -446,6 +476,8 @@ def run_tight(prs, odo, cfg: TightConfig | None = None, *, smooth: bool = False,
     n_sats = np.zeros(K, int)
     n_refl = np.zeros(K, int)
     infl = np.ones(K)
+    held = np.zeros(K, bool)
+    guard = DriftGuard(cfg.guard) if cfg.guard is not None else None
     M = len(prs.t)
     obs_res = np.full(M, np.nan)
     obs_comp = np.full(M, -1, int)
@@ -475,10 +507,23 @@ def run_tight(prs, odo, cfg: TightConfig | None = None, *, smooth: bool = False,
             post = np.exp(logw)
             post /= post.sum()
             keep = post >= cfg.bank_p
+            # two starts that converged to one heading are one hypothesis: keep the likelier
+            for a in np.argsort(-post):
+                if not keep[a]:
+                    continue
+                for b in range(len(bank)):
+                    if b != a and keep[b] and post[b] <= post[a] and abs(
+                            (bank[b].x[IH] - bank[a].x[IH] + math.pi) % (2 * math.pi)
+                            - math.pi) < cfg.bank_merge:
+                        keep[b] = False
             bank = [f for f, kp in zip(bank, keep) if kp]
             logw = logw[keep]
         best = bank[int(np.argmax(logw))]
-        x, P = best.x, best.P_report
+        shown = best if guard is None or len(bank) > 1 else guard.step(
+            t, steps, best, (prs.pr[idx], prs.sat_ecef[idx], sys_idx_all[idx], prs.cn0[idx]),
+            mix, corr.inflation)
+        held[j] = shown is not best
+        x, P = shown.x, shown.P_report
         out["E"][j], out["N"][j], out["U"][j] = x[IE], x[IN], x[IU]
         out["H"][j] = x[IH] % (2 * math.pi)
         out["sE"][j], out["sN"][j] = math.sqrt(P[IE, IE]), math.sqrt(P[IN, IN])
@@ -510,7 +555,10 @@ def run_tight(prs, odo, cfg: TightConfig | None = None, *, smooth: bool = False,
                                                  "sigmas": mix.sigmas.tolist(),
                                                  "weights": mix.weights.round(3).tolist()},
              "reflected_share": float(n_refl.sum() / max(n_sats.sum(), 1)),
-             "inflation_median": float(np.median(infl))}
+             "inflation_median": float(np.median(infl)),
+             "guard_episodes": [] if guard is None else guard.episodes,
+             "guard_max_llr": None if guard is None else guard.max_llr,
+             "held_s": float(np.sum(np.diff(t_ep[k0:], prepend=t_ep[k0])[held]))}
     smoothed = False
     if smooth:
         X, Ps, hist = _smooth(final, prs, sys_idx_all, mix, cfg)
