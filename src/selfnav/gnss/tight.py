@@ -151,6 +151,8 @@ class TightConfig:
     tune_every: float = 5.0                 # s
     mixture: MixtureModel = field(default_factory=MixtureModel)
     smooth_passes: int = 2
+    bias_half_window: float = 5.0           # s, smoother: a satellite's residual mean (±)
+    bias_k: float = 3.0                     # its σ before it is not line of sight (0: off)
     guard: GuardConfig | None = field(default_factory=GuardConfig)   # None: no drift guard
     zenith_sigma0: float = 3.0              # m, residual zenith delay state (0: off)
     zenith_rw: float = 0.0                  # m/√s
@@ -561,7 +563,7 @@ def run_tight(prs, odo, cfg: TightConfig | None = None, *, smooth: bool = False,
              "held_s": float(np.sum(np.diff(t_ep[k0:], prepend=t_ep[k0])[held]))}
     smoothed = False
     if smooth:
-        X, Ps, hist = _smooth(final, prs, sys_idx_all, mix, cfg)
+        X, Ps, hist = _smooth(final, prs, sys_idx_all, keys_all, mix, cfg)
         for k, hh in enumerate(hist):
             idx = hh[6]
             hx, _ = final._model(X[k], prs.sat_ecef[idx], sys_idx_all[idx])
@@ -600,9 +602,38 @@ def _rts(hist):
     return X, Ps
 
 
-def _redo(filt: TightOdometryFilter, hist, X, Ps, prs, sys_idx_all, mix):
+def _biased(filt, hist, X, prs, sys_idx_all, keys_all, mix, half: float, k: float):
+    """Per input pseudorange: does its satellite's residual on the smoothed track ``X`` keep
+    one sign around it? The mean of the residuals (in σ_L) within ±``half`` s against its σ
+    under the line-of-sight model, ``√(N/n)`` (N the correlation inflation, n the count), beyond
+    ``k``. A smoother may look both ways; a bias the mixture's line-of-sight σ hides shows."""
+    M = len(prs.t)
+    z = np.full(M, np.nan)
+    infl = np.ones(M)
+    for kk, h in enumerate(hist):
+        idx = h[6]
+        hx, _ = filt._model(X[kk], prs.sat_ecef[idx], sys_idx_all[idx])
+        z[idx] = (prs.pr[idx] - hx) / mix.sigma_los(prs.cn0[idx])
+        infl[idx] = h[10]
+    out = np.zeros(M, bool)
+    ok = np.isfinite(z)
+    for key in np.unique(keys_all[ok]):
+        m = np.flatnonzero(ok & (keys_all == key))
+        m = m[np.argsort(prs.t[m], kind="stable")]
+        tt, zz = prs.t[m], z[m]
+        c = np.r_[0.0, np.cumsum(zz)]
+        lo = np.searchsorted(tt, tt - half, side="left")
+        hi = np.searchsorted(tt, tt + half, side="right")
+        n = hi - lo
+        mean = (c[hi] - c[lo]) / n
+        out[m] = np.abs(mean) > k * np.sqrt(np.maximum(infl[m], 1.0) / n)
+    return out
+
+
+def _redo(filt: TightOdometryFilter, hist, X, Ps, prs, sys_idx_all, mix, biased=None):
     """The forward pass over stored epochs ``hist`` again, each satellite's component decided
-    on the smoothed track ``X, Ps`` instead of the running estimate. Returns (new hist, filter)."""
+    on the smoothed track ``X, Ps`` instead of the running estimate (never line of sight where
+    ``biased``). Returns (new hist, filter)."""
     f = TightOdometryFilter(*filt.init_args)
     new = []
     for k, h in enumerate(hist):
@@ -615,7 +646,10 @@ def _redo(filt: TightOdometryFilter, hist, X, Ps, prs, sys_idx_all, mix):
         e = prs.pr[idx] - hx
         wgt, mu, var = mix.components(prs.cn0[idx])
         tot = var + np.einsum("ij,jk,ik->i", Hm, Ps[k], Hm)[:, None]
-        comp = np.argmax(np.log(wgt) - 0.5 * (np.log(tot) + (e[:, None] - mu) ** 2 / tot), 1)
+        ll = np.log(wgt) - 0.5 * (np.log(tot) + (e[:, None] - mu) ** 2 / tot)
+        if biased is not None:
+            ll[biased[idx], 0] = -np.inf
+        comp = np.argmax(ll, 1)
         xprior, Pprior = f.x.copy(), f.P.copy()
         f.update(prs.pr[idx], sat, si, prs.cn0[idx], mix, components=comp, inflation=infl)
         new.append((t, xprior, Pprior, f.x.copy(), f.P.copy(), F, idx, comp, steps,
@@ -623,12 +657,14 @@ def _redo(filt: TightOdometryFilter, hist, X, Ps, prs, sys_idx_all, mix):
     return new, f
 
 
-def _smooth(filt: TightOdometryFilter, prs, sys_idx_all, mix, cfg):
+def _smooth(filt: TightOdometryFilter, prs, sys_idx_all, keys_all, mix, cfg):
     """RTS, then each satellite's component re-decided on the smoothed track and the forward
     pass and RTS redone with those components fixed (``cfg.smooth_passes`` in all)."""
     hist = filt.history
     X, Ps = _rts(hist)
     for _ in range(cfg.smooth_passes - 1):
-        hist, _ = _redo(filt, hist, X, Ps, prs, sys_idx_all, mix)
+        biased = (_biased(filt, hist, X, prs, sys_idx_all, keys_all, mix, cfg.bias_half_window,
+                          cfg.bias_k) if cfg.bias_k > 0 else None)
+        hist, _ = _redo(filt, hist, X, Ps, prs, sys_idx_all, mix, biased)
         X, Ps = _rts(hist)
     return X, Ps, hist
