@@ -24,7 +24,7 @@ LAYERS = {
     "allan": 3, "latitude": 3, "moving": 3, "moving_budget": 3, "ins": 3, "roads": 3, "gnss": 3,
     "sim": 3, "moving_driver": 4,
     "seed004": 4, "solution": 4, "summary": 4, "evaluation": 4, "report": 4, "montecarlo": 4,
-    "api": 5, "demo": 6, "campaigns": 6, "cli": 7, "__main__": 8,
+    "api": 5, "api_gnss": 5, "demo": 6, "campaigns": 6, "cli": 7, "__main__": 8,
 }
 
 
