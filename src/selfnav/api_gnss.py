@@ -35,8 +35,8 @@ def read_raw_with_odometry(path, *, fmt: str = "auto"):
     return prs, odo
 
 
-def navigate_raw(gnss_raw, *, fmt: str = "auto", smooth: bool = False, config=None,
-                 progress=None) -> Solution:
+def navigate_raw(gnss_raw, *, fmt: str = "auto", smooth: bool = False,
+                 drift_guard: bool = False, config=None, progress=None) -> Solution:
     """Tightly coupled navigation from raw pseudoranges and a car's speed and yaw rate
     (:func:`selfnav.gnss.tight.run_tight`): every satellite judged on its own against a
     self-tuned mixture of line-of-sight and delayed errors, no heading needed at the start.
@@ -46,6 +46,9 @@ def navigate_raw(gnss_raw, *, fmt: str = "auto", smooth: bool = False, config=No
     gnss_raw : path, or a ``(Pseudoranges, Odometry)`` pair
     fmt : raw format of the file (``"auto"`` or ``"smartloc"``)
     smooth : RTS smoother (post-processing); otherwise causal
+    drift_guard : the drift-hypothesis guard (:mod:`selfnav.gnss.guard`): holds the odometry's
+        track when every satellite drifts together; off by default — on simulated city drives
+        it holds without a drift in 18 of 24 (docs/gnss.md)
     config : :class:`selfnav.gnss.tight.TightConfig`, optional; the odometry's noise defaults to
         the file's own variances (median)
     progress : callable(done, total), optional
@@ -57,6 +60,7 @@ def navigate_raw(gnss_raw, *, fmt: str = "auto", smooth: bool = False, config=No
         yaw_rate_bias_dps, n_sats, n_delayed, clock_m; ``detail`` the
         :class:`selfnav.gnss.tight.TightResult`.
     """
+    from selfnav.gnss.guard import GuardConfig
     from selfnav.gnss.tight import TightConfig, run_tight
 
     if isinstance(gnss_raw, (str, Path)):
@@ -71,6 +75,8 @@ def navigate_raw(gnss_raw, *, fmt: str = "auto", smooth: bool = False, config=No
         if v[0] > 0 and v[5] > 0:
             cfg = replace(cfg, speed_sigma=float(np.sqrt(v[0])),
                           yaw_rate_sigma=float(np.sqrt(v[5])))
+    if drift_guard and cfg.guard is None:
+        cfg = replace(cfg, guard=GuardConfig())
     try:
         r = run_tight(prs, odo, cfg, smooth=smooth, progress=progress)
     except np.linalg.LinAlgError as e:

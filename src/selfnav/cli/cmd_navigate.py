@@ -52,14 +52,14 @@ def _odometer(imu_path: Path, odo_path: Path | None):
 
 
 def _navigate_raw(path: Path, out: Path, *, smooth: bool, fix_log, out_datum: str,
-                  as_json: bool) -> None:
+                  as_json: bool, drift_guard: bool) -> None:
     """``navigate --gnss-raw``: :func:`selfnav.api.navigate_raw`, written and reported."""
     from selfnav import api
     from selfnav.cli.progress import bar
 
     t0 = time.perf_counter()
     with bar("navigating (tight)", enabled=not as_json) as update:
-        sol = api.navigate_raw(path, smooth=smooth,
+        sol = api.navigate_raw(path, smooth=smooth, drift_guard=drift_guard,
                                progress=lambda done, total: update(done / max(total, 1)))
     elapsed = time.perf_counter() - t0
     sol.to_csv(out, datum=out_datum, comments=[
@@ -80,6 +80,10 @@ def _navigate_raw(path: Path, out: Path, *, smooth: bool, fix_log, out_datum: st
     print(f"  satellites given a delayed component: {100 * s['reflected_share']:.0f} %; "
           f"median σ_h {s['median_sigma_h_m']:.1f} m (errors correlated over epochs: "
           f"σ inflated {s['inflation_median']:.0f}× in variance)")
+    for e in s.get("guard_episodes", []):
+        end = "the end" if e["end_s"] is None else f"{e['end_s']:.1f} s"
+        print(f"  drift guard: held the odometry's track from {e['start_s']:.1f} s to {end} "
+              f"(every satellite drifting since {e['branch_s']:.1f} s)")
 
 
 def register(app: typer.Typer) -> None:
@@ -93,6 +97,11 @@ def register(app: typer.Typer) -> None:
             "--gnss-raw", help="Raw pseudoranges with the car's speed and yaw rate in the same "
                                "file (smartLoc format): tightly coupled, every satellite judged "
                                "on its own; instead of --imu and --gnss.")] = None,
+        drift_guard: Annotated[bool, typer.Option(
+            "--drift-guard/--no-drift-guard",
+            help="--gnss-raw: hold the odometry's track when every satellite drifts together "
+                 "(a spoofer's drag); off by default: it also holds on some clean city "
+                 "drives (docs/gnss.md).")] = False,
         method: Annotated[str, opt.choice_option(
             "--method", choices=("ekf", "seed"),
             help="ekf: error-state Kalman filter; seed: seed 004's two loops (needs --map).")
@@ -180,7 +189,7 @@ def register(app: typer.Typer) -> None:
                                    "give it without --imu, --gnss and --map (tight coupling "
                                    "with an IMU is not built yet)")
             _navigate_raw(gnss_raw, out, smooth=smooth, fix_log=fix_log, out_datum=out_datum,
-                          as_json=as_json)
+                          as_json=as_json, drift_guard=drift_guard)
             return
         if imu is None:
             raise SelfnavError("navigate needs --imu FILE (or --gnss-raw FILE: pseudoranges "

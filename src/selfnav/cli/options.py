@@ -248,7 +248,7 @@ HELP_PANELS = {
         "Inputs": ("imu", "gnss", "gnss_raw", "map_", "init", "odometer", "mag", "imu_format",
                    "gnss_format", "gnss_datum", "imu_axes", "imu_mount"),
         "Outputs": ("out", "out_rate", "out_datum", "fix_log", "as_json"),
-        "Method": ("method", "smooth", "grade"),
+        "Method": ("method", "smooth", "grade", "drift_guard"),
         "Sensor geometry and timing (estimated when not given)": (
             "lever_arm", "imu_time_offset", "nhc_lever", "mount_states", "scale_factors"),
         "Vehicle constraints": ("platform", "nhc"),

@@ -74,7 +74,9 @@ class TightConfig:
     clock_drift_rw: float = 1.0             # m/s/√s
     isb_rw: float = 0.01                    # m/√s, inter-system clock offsets
     drift_sigma0: float = 200.0             # m/s
-    position_sigma0: float = 30.0           # m, around the first least-squares fix
+    position_sigma0: float = 30.0           # m, around the first least-squares fix (at least)
+    position_sigma0_unchecked: float = 100.0  # m, when no fix passed its χ² test in start_wait
+    start_wait: float = 10.0                # s of epochs searched for a consistent first fix
     n_heading: int = 12
     bank_p: float = 1e-3                    # a hypothesis below this posterior is dropped
     bank_merge: float = math.radians(3.0)   # headings this close are one hypothesis
@@ -85,7 +87,7 @@ class TightConfig:
     smooth_passes: int = 2
     bias_half_window: float = 5.0           # s, smoother: a satellite's residual mean (±)
     bias_k: float = 3.0                     # its σ before it is not line of sight (0: off)
-    guard: GuardConfig | None = field(default_factory=GuardConfig)   # None: no drift guard
+    guard: GuardConfig | None = None        # the drift guard (opt-in: docs/gnss.md)
     zenith_sigma0: float = 3.0              # m, residual zenith delay state (0: off)
     zenith_rw: float = 0.0                  # m/√s
 
@@ -295,7 +297,9 @@ def _epochs(t_obs):
 
 
 def _first_fix(prs, idx, systems):
-    """Least-squares position and clocks of one epoch (C/N0 weights, exclusion), or None."""
+    """Least-squares position and clocks of one epoch (C/N0 weights, exclusion), or None;
+    with whether its residuals pass their χ² test with 2 or more degrees of freedom left, and
+    its horizontal σ per axis scaled by the residuals."""
     from selfnav.gnss.spp import SppConfig, solve_spp
 
     sp = solve_spp(prs.t[idx], prs.pr[idx], prs.var[idx], prs.sat_ecef[idx], prs.system[idx],
@@ -310,7 +314,9 @@ def _first_fix(prs, idx, systems):
         clocks[j] = c if np.isfinite(c) else (ref if np.isfinite(ref) else 0.0)
     if not np.isfinite(clocks[0]):
         clocks[0] = np.nanmean([v for v in have.values()])
-    return sp.lat[0], sp.lon[0], sp.h[0], clocks
+    vf = sp.variance_factor[0]
+    sigma = float(sp.sigma_m[0] * math.sqrt(max(vf, 1.0) if np.isfinite(vf) else 1.0))
+    return sp.lat[0], sp.lon[0], sp.h[0], clocks, bool(sp.passed[0] and sp.dof[0] >= 2), sigma
 
 
 def run_tight(prs, odo, cfg: TightConfig | None = None, *, smooth: bool = False,
@@ -331,15 +337,27 @@ def run_tight(prs, odo, cfg: TightConfig | None = None, *, smooth: bool = False,
     sys_idx_all = np.array([sys_of[s] for s in prs.system.tolist()], int)
     if len(odo.t) < 2:
         raise SelfnavError("the odometry has fewer than 2 samples")
-    # the start: the first epoch with a least-squares fix
-    k0, fix = 0, None
-    while k0 < len(t_ep) and fix is None:
+    # the start: the first epoch whose least-squares fix passes its χ² test; failing one within
+    # ``start_wait`` s, the first fix at all, with a wide σ
+    k0, fix, first = 0, None, None
+    while k0 < len(t_ep):
         idx = order[bounds[k0]:bounds[k0 + 1]]
-        fix = _first_fix(prs, idx, systems) if len(idx) >= 3 + len(systems) else None
-        k0 += fix is None
+        f = _first_fix(prs, idx, systems) if len(idx) >= 3 + len(systems) else None
+        if f is not None and first is None:
+            first = (k0, f)
+        if f is not None and f[4]:
+            fix = f
+            break
+        if first is not None and t_ep[k0] - t_ep[first[0]] >= cfg.start_wait:
+            break
+        k0 += 1
     if fix is None:
-        raise SelfnavError("no epoch has enough pseudoranges for a first fix")
-    lat0, lon0, h0, clocks = fix
+        if first is None:
+            raise SelfnavError("no epoch has enough pseudoranges for a first fix")
+        k0, fix = first
+        fix = fix[:4] + (False, max(fix[5], cfg.position_sigma0_unchecked))
+    lat0, lon0, h0, clocks, _, fix_sigma = fix
+    pos_sigma0 = max(cfg.position_sigma0, 3.0 * fix_sigma)
     origin = (float(lat0), float(lon0), float(h0))
     r0 = geodetic_to_ecef(lat0, lon0, h0)
     C_en = enu_rotation(lat0, lon0)
@@ -350,8 +368,8 @@ def run_tight(prs, odo, cfg: TightConfig | None = None, *, smooth: bool = False,
     x0[IS] = 1.0
     x0[IC] = clocks[0]
     x0[IZ + 1:] = clocks[1:] - clocks[0]
-    P0 = np.diag(np.r_[[cfg.position_sigma0 ** 2] * 3, [0.0], cfg.scale_sigma0 ** 2,
-                       cfg.bias_sigma0 ** 2, cfg.position_sigma0 ** 2, cfg.drift_sigma0 ** 2,
+    P0 = np.diag(np.r_[[pos_sigma0 ** 2] * 3, [0.0], cfg.scale_sigma0 ** 2,
+                       cfg.bias_sigma0 ** 2, pos_sigma0 ** 2, cfg.drift_sigma0 ** 2,
                        cfg.zenith_sigma0 ** 2, [cfg.position_sigma0 ** 2] * (nsys - 1)])
     if heading0 is None:
         spacing = 2 * math.pi / cfg.n_heading
