@@ -617,6 +617,7 @@ def write_sat_log(path, solution: Solution):
 
 __all__ += ["read_gnss_raw", "spp", "receiver_solution", "write_sat_log"]
 
-from selfnav.api_gnss import navigate_raw, write_tight_log  # noqa: E402  (issue 23, part 3)
+from selfnav.api_gnss import (navigate_raw, simulate_city_files,  # noqa: E402  (issue 23)
+                              write_tight_log)
 
-__all__ += ["navigate_raw", "write_tight_log"]
+__all__ += ["navigate_raw", "write_tight_log", "simulate_city_files"]

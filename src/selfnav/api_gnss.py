@@ -117,4 +117,23 @@ def write_tight_log(path, solution: Solution):
                           "residual_m": "%.3f"})
 
 
-__all__ = ["navigate_raw", "write_tight_log", "read_raw_with_odometry"]
+#: Files ``selfnav simulate city`` writes (the smartLoc names, for :func:`navigate_raw`).
+CITY_FILES = ("city_Input.txt", "city_GT.txt")
+
+
+def simulate_city_files(out_dir, *, seed: int = 0, duration: float | None = None):
+    """A SIMULATED city drive (:func:`selfnav.sim.urban.simulate_urban_drive`) written into the
+    folder ``out_dir`` as ``city_Input.txt`` (pseudoranges + odometry) and ``city_GT.txt``
+    (truth), smartLoc format, as one set. Returns ``(Pseudoranges, Odometry, truth, paths)``."""
+    from selfnav.io.output import atomic_folder
+    from selfnav.io.smartloc import write_smartloc
+    from selfnav.sim.urban import UrbanConfig, simulate_urban_drive
+
+    cfg = UrbanConfig() if duration is None else replace(UrbanConfig(), duration=float(duration))
+    prs, odo, truth = simulate_urban_drive(seed, cfg)
+    with atomic_folder(out_dir, owned=CITY_FILES) as tmp:
+        write_smartloc(tmp / CITY_FILES[0], tmp / CITY_FILES[1], prs, odo, truth)
+    return prs, odo, truth, [Path(out_dir) / f for f in CITY_FILES]
+
+
+__all__ = ["navigate_raw", "write_tight_log", "read_raw_with_odometry", "simulate_city_files"]

@@ -12,12 +12,32 @@ from selfnav.cli.common import emit_json
 STAGES = ("trajectory", "inverse strapdown", "sensor errors", "magnetometer", "GNSS", "writing")
 
 
+def _city(out, seed: int, duration, as_json: bool) -> None:
+    """``simulate city``: :func:`selfnav.api.simulate_city_files`, reported."""
+    from selfnav import api
+
+    prs, odo, _, paths = api.simulate_city_files(out, seed=seed, duration=duration)
+    epochs = len(set(prs.t.tolist()))
+    res = {"scenario": "city", "seed": seed, "out": str(out), "files": [p.name for p in paths],
+           "duration_s": float(odo.t[-1] - odo.t[0]), "epochs": epochs,
+           "pseudoranges": len(prs.t), "satellites_per_epoch": len(prs.t) / max(epochs, 1),
+           "simulated": True}
+    if as_json:
+        emit_json(res)
+        return
+    print(f"simulated city drive, seed {seed}: {epochs} epochs over {res['duration_s']:.1f} s, "
+          f"{res['satellites_per_epoch']:.1f} satellites per epoch (reflections in the streets)")
+    print(f"  wrote {', '.join(res['files'])} to {out}")
+
+
 def register(app: typer.Typer) -> None:
     @app.command("simulate")
     def simulate_cmd(
         scenario: Annotated[str, typer.Argument(
             metavar="SCENARIO", help="static, multiposition, ship, aircraft, car; the platforms "
-                                     "pedestrian, rover, boat, drone; or a TOML scenario file.")],
+                                     "pedestrian, rover, boat, drone; city (raw pseudoranges "
+                                     "and odometry in city streets, smartLoc files for "
+                                     "navigate --gnss-raw); or a TOML scenario file.")],
         out: opt.out_folder("Folder for imu.csv, gnss.csv, gnss_errors.csv, truth.csv, "
                             "mag.csv and the map (car)."),
         seed: opt.Seed = 0,
@@ -44,6 +64,9 @@ def register(app: typer.Typer) -> None:
         from selfnav.io.output import check_output_folder
 
         check_output_folder(out)
+        if scenario == "city":
+            _city(out, seed, duration, as_json)
+            return
         if as_json or not sys.stderr.isatty():
             stage = lambda name: None  # noqa: E731
             ctx = None

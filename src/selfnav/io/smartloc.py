@@ -206,6 +206,29 @@ def read_smartloc_truth(path) -> SmartlocTruth:
     return SmartlocTruth(g[:, 0], g[:, 1:4].copy(), source=str(path))
 
 
+def write_smartloc(input_path, gt_path, prs: Pseudoranges, odo: Odometry,
+                   truth: SmartlocTruth) -> None:
+    """Write pseudoranges and odometry as a smartLoc ``*_Input.txt`` (lines in time order,
+    each epoch's odometry before its pseudoranges) and the truth as ``*_GT.txt`` — the paths
+    given (temporary files: the caller moves them into place)."""
+    lines = []
+    for k in range(len(odo.t)):
+        v, w, q = odo.velocity_b[k], odo.omega_b[k], odo.variances[k]
+        lines.append((odo.t[k], 0, "odom3 " + " ".join(f"{x:.9g}" for x in (
+            odo.t[k], *v, *w, *q))))
+    el = np.degrees(prs.elevation)
+    for i in range(len(prs.t)):
+        x, y, z = prs.sat_ecef[i]
+        lines.append((prs.t[i], 1, f"pseudorange3 {prs.t[i]:.9g} {prs.pr[i]:.4f} "
+                      f"{prs.var[i]:.6g} {x:.4f} {y:.4f} {z:.4f} {int(prs.sat_id[i])} "
+                      f"{int(prs.system[i])} {el[i]:.4f} {prs.cn0[i]:.2f}"))
+    lines.sort(key=lambda r: (r[0], r[1]))
+    Path(input_path).write_text("\n".join(r[2] for r in lines) + "\n", encoding="ascii")
+    Path(gt_path).write_text("".join(
+        f"point3 {t:.9g} {x:.4f} {y:.4f} {z:.4f}" + " 0" * 9 + "\n"
+        for t, (x, y, z) in zip(truth.t, truth.ecef)), encoding="ascii")
+
+
 def find_smartloc_files(folder):
     """The ``*_Input.txt`` and ``*_GT.txt`` files of a smartLoc folder."""
     folder = Path(folder)
