@@ -48,6 +48,24 @@ def test_interrupt_while_writing_leaves_the_old_set(tmp_path, capsys, monkeypatc
     assert _set(out) == old and sorted(p.name for p in tmp_path.iterdir()) == ["sim"]
 
 
+def test_ctrl_c_inside_a_c_extensions_import_is_an_interrupt(tmp_path, capsys, monkeypatch):
+    """A Ctrl-C that lands while a C extension initialises (osmium, under CI load) comes back
+    as 'ImportError: initialization failed': still one line and exit 130, nothing written."""
+    import selfnav.io.trajectory as traj
+    from selfnav.errors import interrupt_requested
+
+    def import_interrupted(*a, **k):
+        interrupt_requested.set()          # what the SIGINT handler does first
+        raise ImportError("initialization failed")
+
+    monkeypatch.setattr(traj, "write_truth", import_interrupted)
+    out = tmp_path / "sim"
+    code, _, err = run(["simulate", "car", "--out", out, "--seed", "2", "--duration", "60"],
+                       capsys)
+    assert code == 130 and err.strip() == "selfnav: interrupted"
+    assert not out.exists()
+
+
 def _umask():
     from selfnav.io.output import umask
 

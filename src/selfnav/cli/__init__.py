@@ -111,6 +111,13 @@ def _interrupt_as_error(last: bool = False):
     old = signal.signal(signal.SIGINT, handler)
     try:
         yield
+    except Exception as e:
+        # a Ctrl-C that lands inside a C extension's module initialisation comes back as
+        # "ImportError: initialization failed" (pybind11), or wrapped by a library: it is
+        # still the user's Ctrl-C, not a crash
+        if interrupt_requested.is_set() and not isinstance(e, (Interrupted, SelfnavError)):
+            raise Interrupted() from e
+        raise
     finally:
         signal.signal(signal.SIGINT, signal.SIG_IGN if last else old)
         interrupt_requested.clear()
