@@ -358,3 +358,29 @@ def test_simulate_city_then_navigate_gnss_raw_end_to_end(tmp_path, capsys):
     sp = spp_from_pseudoranges(prs, SppConfig(weighting="cn0"))
     assert np.sqrt(np.mean(e ** 2)) < np.sqrt(np.nanmean(
         horizontal_error(sp, ref_truth.t, ref_truth.ecef) ** 2))
+
+
+@pytest.mark.slow
+def test_a_ramp_on_two_strong_satellites_is_excluded_within_10_s_in_city_drives():
+    """SIMULATED city drives (σ0 1 m): the two strongest satellites at 120 s ramp at 1 m/s
+    for 60 s (issue 23). Neither is used as line of sight after 10 s in any drive; the median
+    drive's extra error stays below 1 m (docs/gnss.md: two of five drives then wander 4–6 m,
+    the max-mixture choosing differently)."""
+    from selfnav.sim.urban import horizontal_errors, simulate_urban_drive
+
+    t0, extra = 120.0, []
+    for seed in (1, 10, 12, 14, 22):
+        prs, odo, truth = simulate_urban_drive(seed)
+        keys = prs.system * 1000 + prs.sat_id
+        at = np.abs(prs.t - t0) < 1e-6
+        two = keys[at][np.argsort(-prs.cn0[at])][:2]
+        hit = np.isin(keys, two) & (prs.t >= t0) & (prs.t < t0 + 60.0)
+        bad = replace(prs, pr=prs.pr + np.where(hit, prs.t - t0, 0.0))
+        clean, r = run_tight(prs, odo), run_tight(bad, odo)
+        used_los = prs.t[hit][r.obs_component[hit] == 0]
+        assert len(used_los) == 0 or used_los.max() - t0 < 10.0
+        win = (r.t >= t0) & (r.t < t0 + 70.0)
+        e = horizontal_errors(r.t, r.east, r.north, r.origin, truth)
+        ec = horizontal_errors(clean.t, clean.east, clean.north, clean.origin, truth)
+        extra.append(np.max(e[win] - ec[win]))
+    assert np.median(extra) < 1.0
