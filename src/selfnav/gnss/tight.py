@@ -85,6 +85,7 @@ class TightConfig:
     tune_every: float = 5.0                 # s
     mixture: MixtureModel = field(default_factory=MixtureModel)
     smooth_passes: int = 2
+    report_ambiguity: bool = True
     bias_half_window: float = 5.0           # s, smoother: a satellite's residual mean (±)
     bias_k: float = 3.0                     # its σ before it is not line of sight (0: off)
     guard: GuardConfig | None = None        # the drift guard (opt-in: docs/gnss.md)
@@ -248,7 +249,16 @@ class TightOdometryFilter:
                                                     + len(pr) * _LOG_2PI)
                                             + np.sum(logw[rows, comp]))
         self.x, self.P = xj, 0.5 * (P + P.T)
-        Pr = IKH @ self.P_report @ IKH.T + (K * (R * inflation)) @ K.T
+        R_rep = R * inflation
+        if self.cfg.report_ambiguity and components is None:
+            # the choice of component is itself uncertain: the reported covariance takes the
+            # mixture's spread about the chosen component, weighted by the responsibilities
+            # at the residual the choice was made on
+            g = np.exp(ll - ll.max(1, keepdims=True))
+            g /= g.sum(1, keepdims=True)
+            chosen = mu[rows, comp]
+            R_rep = R_rep + np.sum(g * (var + (mu - chosen[:, None]) ** 2), 1) - g[rows, comp] * var[rows, comp]
+        Pr = IKH @ self.P_report @ IKH.T + (K * R_rep) @ K.T
         self.P_report = 0.5 * (Pr + Pr.T)
         h, _ = self._model(self.x, sat, sys_idx)
         self.residual = pr - h
