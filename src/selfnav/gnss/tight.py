@@ -8,36 +8,43 @@ on its own.
 
 State (tangent plane at ``origin``)::
 
-    x = [E, N, U, H, s, b, c, d, c_2 … c_k]     position (m), heading H (rad, clockwise from
+    x = [E, N, U, H, s, b, c, d, z, c_2 … c_k]  position (m), heading H (rad, clockwise from
                                                 North), speed scale s, yaw-rate bias b (rad/s),
                                                 receiver clock c (m, first system), clock drift
-                                                d (m/s), clock offsets of the other systems (m)
+                                                d (m/s), residual zenith delay z (m), clock
+                                                offsets of the other systems (m)
 
 Pseudorange of satellite i (system j), with the Earth-rotation term of
 :func:`selfnav.gnss.models.pseudorange_model`::
 
-    ρ_i = |r_i − r| + ω_e/c (x_i y − y_i x) + c + c_j + e_i                                    (1)
+    ρ_i = |r_i − r| + ω_e/c (x_i y − y_i x) + c + z / sin(E_i) + c_j + e_i                   (1)
 
-**The error e_i is a mixture** (an urban canyon's reflected signals arrive late: their error is
-positive and large)::
+**The error e_i is a mixture** (:mod:`selfnav.gnss.mixture`; an urban canyon's reflected
+signals arrive late: their error is positive and large)::
 
-    p(e | C/N0) = (1 − π(C/N0)) N(0, σ_L(C/N0)²) + π(C/N0) N(μ_R, σ_R²),
+    p(e | C/N0) = w_0 N(0, σ_L(C/N0)²) + Σ_k w_k N(μ_k, σ_k²),   w per C/N0 band,
     σ_L(C/N0) = σ_L45 · 10^((45 − C/N0)/20)                                                 (2)
 
 Each epoch's update is a max-mixture iterated EKF: every satellite takes the component that
 explains its residual best at the current estimate (with the prior's spread on the first pass),
-the update is redone from the prior until the choice settles. The mixture's parameters
-(σ_L45, μ_R, σ_R and π per C/N0 band) are **tuned on the fly** by expectation-maximisation over
-the post-fit residuals of the last ``tune_window`` seconds — causal: an epoch's model was fitted
-on earlier epochs only.
+the update is redone from the prior until the choice settles. The mixture's parameters are
+**tuned on the fly** by expectation-maximisation over the post-fit residuals of the last
+``tune_window`` seconds — causal: an epoch's model was fitted on earlier epochs only.
 
-**Heading at the start** is not needed: a bank of ``n_heading`` filters spaced evenly around the
-circle runs until the pseudoranges' likelihood leaves one (posterior ``> 1 − bank_p``, or the last
-survivor); until then the output is the most probable one. Position, clocks and height start from
-the first epoch's least squares (:func:`selfnav.gnss.spp.solve_spp`).
+**The σ reported** (``P_report``) is propagated with the same gains, R inflated by the lag-one
+correlation of the residuals, ``(1 + ρ)/(1 − ρ)``, plus the mixture's spread about each chosen
+component (responsibility-weighted): the filter's own P takes the errors as independent.
+
+**Start**: position, clocks and height from the first epoch whose least-squares fix
+(:func:`selfnav.gnss.spp.solve_spp`) passes its χ² test (``start_wait`` s at most); the heading
+is not needed: a bank of ``n_heading`` filters spaced evenly around the circle runs until the
+pseudoranges' likelihood leaves one (posterior ``> 1 − bank_p``, starts that converged to one
+heading merged); until then the output is the most probable one.
 
 The RTS smoother (``smooth=True``) runs over the chosen filter's stored epochs and then
-re-decides each satellite's component on the smoothed track and smooths again (``smooth_passes``).
+re-decides each satellite's component on the smoothed track (refusing line of sight to a
+satellite whose residuals keep one sign) and smooths again (``smooth_passes``). The drift guard
+(:mod:`selfnav.gnss.guard`, ``cfg.guard``) is opt-in.
 """
 from __future__ import annotations
 
