@@ -232,13 +232,10 @@ class TightOdometryFilter:
         for it in range(cfg.iterations if components is None else 1):
             h, Hm = self._model(xj, sat, sys_idx)
             e = pr - h
-            if components is None:
-                spread = np.einsum("ij,jk,ik->i", Hm, Pp if it == 0 else P, Hm)
-                tot = var + spread[:, None]
-                ll = logw - 0.5 * (np.log(tot) + (e[:, None] - mu) ** 2 / tot)
-                new = np.argmax(ll, axis=1)
-            else:
-                new = np.asarray(components, int)
+            spread = np.einsum("ij,jk,ik->i", Hm, Pp if it == 0 else P, Hm)
+            tot = var + spread[:, None]
+            ll = logw - 0.5 * (np.log(tot) + (e[:, None] - mu) ** 2 / tot)
+            new = np.argmax(ll, axis=1) if components is None else np.asarray(components, int)
             if comp is not None and np.array_equal(new, comp):
                 break
             comp = new
@@ -257,7 +254,7 @@ class TightOdometryFilter:
                                             + np.sum(logw[rows, comp]))
         self.x, self.P = xj, 0.5 * (P + P.T)
         R_rep = R * inflation
-        if self.cfg.report_ambiguity and components is None:
+        if self.cfg.report_ambiguity:
             # the choice of component is itself uncertain: the reported covariance takes the
             # mixture's spread about the chosen component, weighted by the responsibilities
             # at the residual the choice was made on
@@ -432,11 +429,12 @@ def run_tight(prs, odo, cfg: TightConfig | None = None, *, smooth: bool = False,
             F = np.eye(f.n)
             for v, w, dt in steps:
                 F = f.predict(v, w, dt) @ F
-            xprior, Pprior = f.x.copy(), f.P.copy()
+            xprior, Pprior, Prprior = f.x.copy(), f.P.copy(), f.P_report.copy()
             f.update(prs.pr[idx], prs.sat_ecef[idx], sys_idx_all[idx], prs.cn0[idx], mix,
                      inflation=corr.inflation)
             f.history.append((t, xprior, Pprior, f.x.copy(), f.P.copy(), F, idx,
-                              f.component.copy(), steps, f.P_report.copy(), corr.inflation))
+                              f.component.copy(), steps, f.P_report.copy(), corr.inflation,
+                              Prprior))
         if len(bank) > 1:
             logw += np.array([f.log_likelihood for f in bank])
             logw -= logw.max()
@@ -505,9 +503,9 @@ def run_tight(prs, odo, cfg: TightConfig | None = None, *, smooth: bool = False,
         n_refl = np.array([int(np.sum(hh[7] >= 1)) for hh in hist])
         out["E"], out["N"], out["U"] = X[:, IE], X[:, IN], X[:, IU]
         out["H"] = X[:, IH] % (2 * math.pi)
-        # the smoother averages the same correlated errors: its covariance takes the inflation
-        out["sE"] = np.sqrt(Ps[:, IE, IE] * infl)
-        out["sN"] = np.sqrt(Ps[:, IN, IN] * infl)
+        # the smoother's reported covariance (Ps here): the same gains on the report model
+        out["sE"] = np.sqrt(np.maximum(Ps[:, IE, IE], 0.0))
+        out["sN"] = np.sqrt(np.maximum(Ps[:, IN, IN], 0.0))
         out["clk"] = X[:, IC]
         out["S"], out["B"] = X[:, IS], X[:, IB]
         smoothed = True
@@ -519,21 +517,26 @@ def run_tight(prs, odo, cfg: TightConfig | None = None, *, smooth: bool = False,
                        n_refl, out["clk"], origin, smoothed, stats, obs_res, obs_comp)
 
 
-def _rts(hist):
-    """RTS smoother over stored (t, x⁻, P⁻, x⁺, P⁺, F, …) epochs; heading differences wrapped."""
+def _rts(hist, report: bool = False):
+    """RTS smoother over stored (t, x⁻, P⁻, x⁺, P⁺, F, …) epochs; heading differences wrapped.
+    ``report``: also the reported covariance the same gains give, from the stored
+    ``P_report`` before and after each update (the σ the smoother reports)."""
     K = len(hist)
     X = np.array([h[3] for h in hist])
     Ps = np.array([h[4] for h in hist])
+    Pr = np.array([h[9] for h in hist]) if report else None
     for k in range(K - 2, -1, -1):
         xf, Pf = hist[k][3], hist[k][4]
         xp1, Pp1, F1 = hist[k + 1][1], hist[k + 1][2], hist[k + 1][5]
-        # a state held at zero variance (an unused slot, a switched-off state) gains nothing
+        # a state held at zero variance (a switched-off state) gains nothing
         C = np.linalg.solve(Pp1.T + 1e-9 * np.eye(len(Pp1)), (Pf @ F1.T).T).T
         dx = X[k + 1] - xp1
         dx[IH] = (dx[IH] + math.pi) % (2 * math.pi) - math.pi
         X[k] = xf + C @ dx
         Ps[k] = Pf + C @ (Ps[k + 1] - Pp1) @ C.T
-    return X, Ps
+        if report:
+            Pr[k] = hist[k][9] + C @ (Pr[k + 1] - hist[k + 1][11]) @ C.T
+    return (X, Ps, Pr) if report else (X, Ps)
 
 
 def _biased(filt, hist, X, prs, sys_idx_all, keys_all, mix, half: float, k: float):
@@ -584,10 +587,10 @@ def _redo(filt: TightOdometryFilter, hist, X, Ps, prs, sys_idx_all, mix, biased=
         if biased is not None:
             ll[biased[idx], 0] = -np.inf
         comp = np.argmax(ll, 1)
-        xprior, Pprior = f.x.copy(), f.P.copy()
+        xprior, Pprior, Prprior = f.x.copy(), f.P.copy(), f.P_report.copy()
         f.update(prs.pr[idx], sat, si, prs.cn0[idx], mix, components=comp, inflation=infl)
         new.append((t, xprior, Pprior, f.x.copy(), f.P.copy(), F, idx, comp, steps,
-                    f.P_report.copy(), infl))
+                    f.P_report.copy(), infl, Prprior))
     return new, f
 
 
@@ -601,4 +604,5 @@ def _smooth(filt: TightOdometryFilter, prs, sys_idx_all, keys_all, mix, cfg):
                           cfg.bias_k) if cfg.bias_k > 0 else None)
         hist, _ = _redo(filt, hist, X, Ps, prs, sys_idx_all, mix, biased)
         X, Ps = _rts(hist)
-    return X, Ps, hist
+    _, _, Pr = _rts(hist, report=True)
+    return X, Pr, hist
