@@ -51,6 +51,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 
@@ -58,9 +59,11 @@ from selfnav.earth import enu_rotation, enu_to_geodetic, geodetic_to_ecef
 from selfnav.errors import SelfnavError
 from selfnav.gnss.guard import DriftGuard, GuardConfig
 from selfnav.gnss.mixture import MixtureModel, ResidualCorrelation
-from selfnav.gnss.models import C_LIGHT, OMEGA_EARTH
+from selfnav.gnss.models import pseudorange_model
+from selfnav.gnss.odometry import propagate
 
 IE, IN, IU, IH, IS, IB, IC, ID, IZ = range(9)
+_ODO = [IE, IN, IH, IS, IB]             # the states of selfnav.gnss.odometry, in its order
 _LOG_2PI = math.log(2.0 * math.pi)
 _SIN_MASK = math.sin(math.radians(5.0))
 
@@ -100,17 +103,24 @@ class TightConfig:
     zenith_rw: float = 0.0                  # m/√s
 
 
-def _sagnac_range(r, sat):
-    """Range (1) without clocks from receiver ECEF ``r`` (3,) to satellites (n, 3); unit rows."""
-    d = sat - r
-    rng = np.sqrt(np.einsum("ij,ij->i", d, d))
-    k = OMEGA_EARTH / C_LIGHT
-    rho = rng + k * (sat[:, 0] * r[1] - sat[:, 1] * r[0])
-    g = np.empty_like(d)
-    g[:, 0] = -d[:, 0] / rng - k * sat[:, 1]
-    g[:, 1] = -d[:, 1] / rng + k * sat[:, 0]
-    g[:, 2] = -d[:, 2] / rng
-    return rho, g
+class Epoch(NamedTuple):
+    """One stored epoch of a filter, for its smoother: the state and covariance before
+    (``x_prior``, ``P_prior``, ``Pr_prior``: the reported one) and after the update, the
+    transition ``F`` from the epoch before, the pseudoranges' rows ``idx`` and the components
+    chosen, the odometry ``steps`` and the correlation ``inflation`` used."""
+
+    t: float
+    x_prior: np.ndarray
+    P_prior: np.ndarray
+    x: np.ndarray
+    P: np.ndarray
+    F: np.ndarray
+    idx: np.ndarray
+    comp: np.ndarray
+    steps: list
+    Pr: np.ndarray
+    inflation: float
+    Pr_prior: np.ndarray
 
 
 class TightOdometryFilter:
@@ -119,7 +129,8 @@ class TightOdometryFilter:
     After ``update`` the object holds ``x, P``, the satellites' ``residual`` (post-fit, m),
     ``component`` (0 line of sight, 1… delayed), the epoch's ``log_likelihood``, and ``P_report``:
     the covariance the same gains give when each satellite's error is correlated in time
-    (:func:`correlation_inflation`) — the σ it reports.
+    (:class:`selfnav.gnss.mixture.ResidualCorrelation`) and its component uncertain — the σ it
+    reports.
     """
 
     def __init__(self, x0, P0, origin_ecef, C_en, systems, cfg: TightConfig):
@@ -157,26 +168,15 @@ class TightOdometryFilter:
 
     # --- propagation: seed odometry (1)-(2) and the clock -----------------------------------
     def predict(self, v, w, dt):
-        cfg, x = self.cfg, self.x
-        H, s, b = x[IH], x[IS], x[IB]
-        hd = -(w - b)
-        Hm = H + 0.5 * dt * hd
-        sH, cH = math.sin(Hm), math.cos(Hm)
-        d = s * v * dt
-        n = self.n
+        cfg, x, n = self.cfg, self.x, self.n
+        # the odometry's own states follow docs/smartloc.md (2) (selfnav.gnss.odometry)
+        xo, Fo, Go = propagate(x[_ODO], v, w, dt)
+        x[_ODO] = xo
         F = np.eye(n)
-        F[IE, IH], F[IN, IH] = d * cH, -d * sH
-        F[IE, IS], F[IN, IS] = v * dt * sH, v * dt * cH
-        F[IE, IB], F[IN, IB] = 0.5 * dt * d * cH, -0.5 * dt * d * sH
-        F[IH, IB] = dt
-        F[IC, ID] = dt
+        F[np.ix_(_ODO, _ODO)] = Fo
         G = np.zeros((n, 2))
-        G[IE, 0], G[IN, 0] = s * dt * sH, s * dt * cH
-        G[IE, 1], G[IN, 1] = -0.5 * dt * d * cH, 0.5 * dt * d * sH
-        G[IH, 1] = -dt
-        x[IE] += d * sH
-        x[IN] += d * cH
-        x[IH] += dt * hd
+        G[_ODO] = Go
+        F[IC, ID] = dt
         x[IC] += dt * x[ID]
         q = np.zeros(n)
         q[IE] = q[IN] = cfg.pos_rw ** 2 * dt
@@ -202,9 +202,9 @@ class TightOdometryFilter:
         p = x[IE:IU + 1].copy()
         if self.nd is not None:
             p[:2] += x[self.nd:self.nd + 2]
-        rho, g = _sagnac_range(self.r0 + self.C_ne @ p, sat)
+        rho, H4 = pseudorange_model(self.r0 + self.C_ne @ p, 0.0, sat)
         Hm = np.zeros((len(rho), self.n))
-        Hm[:, IE:IU + 1] = g @ self.C_ne
+        Hm[:, IE:IU + 1] = H4[:, :3] @ self.C_ne
         if self.nd is not None:
             Hm[:, self.nd:self.nd + 2] = Hm[:, IE:IN + 1]
         Hm[:, IC] = 1.0
@@ -254,14 +254,15 @@ class TightOdometryFilter:
                                             + np.sum(logw[rows, comp]))
         self.x, self.P = xj, 0.5 * (P + P.T)
         R_rep = R * inflation
-        if self.cfg.report_ambiguity:
+        if cfg.report_ambiguity:
             # the choice of component is itself uncertain: the reported covariance takes the
             # mixture's spread about the chosen component, weighted by the responsibilities
             # at the residual the choice was made on
             g = np.exp(ll - ll.max(1, keepdims=True))
             g /= g.sum(1, keepdims=True)
             chosen = mu[rows, comp]
-            R_rep = R_rep + np.sum(g * (var + (mu - chosen[:, None]) ** 2), 1) - g[rows, comp] * var[rows, comp]
+            R_rep = (R_rep + np.sum(g * (var + (mu - chosen[:, None]) ** 2), 1)
+                     - g[rows, comp] * var[rows, comp])
         Pr = IKH @ self.P_report @ IKH.T + (K * R_rep) @ K.T
         self.P_report = 0.5 * (Pr + Pr.T)
         h, _ = self._model(self.x, sat, sys_idx)
@@ -273,9 +274,10 @@ class TightOdometryFilter:
 @dataclass
 class TightResult:
     """Per epoch: ``t``, ``east, north, up`` (tangent plane at ``origin`` = (lat, lon, h)),
-    ``lat, lon, h``, ``heading`` (rad), ``scale``, ``yaw_bias`` (rad/s), ``sigma_e, sigma_n``, ``n_sats``, ``n_reflected`` (the
-    satellites given a delayed component), ``clock`` (m), ``smoothed``; ``stats`` (dict); per input
-    pseudorange ``obs_residual`` (m, at the output state) and ``obs_component``."""
+    ``lat, lon, h``, ``heading`` (rad), ``scale``, ``yaw_bias`` (rad/s), ``sigma_e, sigma_n``,
+    ``n_sats``, ``n_reflected`` (the satellites given a delayed component), ``clock`` (m),
+    ``smoothed``; ``stats`` (dict); per input pseudorange ``obs_residual`` (m, at the output
+    state) and ``obs_component``."""
 
     t: np.ndarray
     east: np.ndarray
@@ -432,9 +434,9 @@ def run_tight(prs, odo, cfg: TightConfig | None = None, *, smooth: bool = False,
             xprior, Pprior, Prprior = f.x.copy(), f.P.copy(), f.P_report.copy()
             f.update(prs.pr[idx], prs.sat_ecef[idx], sys_idx_all[idx], prs.cn0[idx], mix,
                      inflation=corr.inflation)
-            f.history.append((t, xprior, Pprior, f.x.copy(), f.P.copy(), F, idx,
-                              f.component.copy(), steps, f.P_report.copy(), corr.inflation,
-                              Prprior))
+            f.history.append(Epoch(t, xprior, Pprior, f.x.copy(), f.P.copy(), F, idx,
+                                   f.component.copy(), steps, f.P_report.copy(),
+                                   corr.inflation, Prprior))
         if len(bank) > 1:
             logw += np.array([f.log_likelihood for f in bank])
             logw -= logw.max()
@@ -496,11 +498,10 @@ def run_tight(prs, odo, cfg: TightConfig | None = None, *, smooth: bool = False,
     smoothed = False
     if smooth:
         X, Ps, hist = _smooth(final, prs, sys_idx_all, keys_all, mix, cfg)
-        for k, hh in enumerate(hist):
-            idx = hh[6]
-            hx, _ = final._model(X[k], prs.sat_ecef[idx], sys_idx_all[idx])
-            obs_res[idx], obs_comp[idx] = prs.pr[idx] - hx, hh[7]
-        n_refl = np.array([int(np.sum(hh[7] >= 1)) for hh in hist])
+        for k, ep in enumerate(hist):
+            hx, _ = final._model(X[k], prs.sat_ecef[ep.idx], sys_idx_all[ep.idx])
+            obs_res[ep.idx], obs_comp[ep.idx] = prs.pr[ep.idx] - hx, ep.comp
+        n_refl = np.array([int(np.sum(ep.comp >= 1)) for ep in hist])
         out["E"], out["N"], out["U"] = X[:, IE], X[:, IN], X[:, IU]
         out["H"] = X[:, IH] % (2 * math.pi)
         # the smoother's reported covariance (Ps here): the same gains on the report model
@@ -518,16 +519,16 @@ def run_tight(prs, odo, cfg: TightConfig | None = None, *, smooth: bool = False,
 
 
 def _rts(hist, report: bool = False):
-    """RTS smoother over stored (t, x⁻, P⁻, x⁺, P⁺, F, …) epochs; heading differences wrapped.
-    ``report``: also the reported covariance the same gains give, from the stored
-    ``P_report`` before and after each update (the σ the smoother reports)."""
+    """RTS smoother over stored :class:`Epoch` s; heading differences wrapped. ``report``: also
+    the reported covariance the same gains give, from the stored ``P_report`` before and after
+    each update (the σ the smoother reports)."""
     K = len(hist)
-    X = np.array([h[3] for h in hist])
-    Ps = np.array([h[4] for h in hist])
-    Pr = np.array([h[9] for h in hist]) if report else None
+    X = np.array([ep.x for ep in hist])
+    Ps = np.array([ep.P for ep in hist])
+    Pr = np.array([ep.Pr for ep in hist]) if report else None
     for k in range(K - 2, -1, -1):
-        xf, Pf = hist[k][3], hist[k][4]
-        xp1, Pp1, F1 = hist[k + 1][1], hist[k + 1][2], hist[k + 1][5]
+        xf, Pf = hist[k].x, hist[k].P
+        xp1, Pp1, F1 = hist[k + 1].x_prior, hist[k + 1].P_prior, hist[k + 1].F
         # a state held at zero variance (a switched-off state) gains nothing
         C = np.linalg.solve(Pp1.T + 1e-9 * np.eye(len(Pp1)), (Pf @ F1.T).T).T
         dx = X[k + 1] - xp1
@@ -535,7 +536,7 @@ def _rts(hist, report: bool = False):
         X[k] = xf + C @ dx
         Ps[k] = Pf + C @ (Ps[k + 1] - Pp1) @ C.T
         if report:
-            Pr[k] = hist[k][9] + C @ (Pr[k + 1] - hist[k + 1][11]) @ C.T
+            Pr[k] = hist[k].Pr + C @ (Pr[k + 1] - hist[k + 1].Pr_prior) @ C.T
     return (X, Ps, Pr) if report else (X, Ps)
 
 
@@ -548,10 +549,10 @@ def _biased(filt, hist, X, prs, sys_idx_all, keys_all, mix, half: float, k: floa
     z = np.full(M, np.nan)
     infl = np.ones(M)
     for kk, h in enumerate(hist):
-        idx = h[6]
+        idx = h.idx
         hx, _ = filt._model(X[kk], prs.sat_ecef[idx], sys_idx_all[idx])
         z[idx] = (prs.pr[idx] - hx) / mix.sigma_los(prs.cn0[idx])
-        infl[idx] = h[10]
+        infl[idx] = h.inflation
     out = np.zeros(M, bool)
     ok = np.isfinite(z)
     for key in np.unique(keys_all[ok]):
@@ -574,7 +575,7 @@ def _redo(filt: TightOdometryFilter, hist, X, Ps, prs, sys_idx_all, mix, biased=
     f = TightOdometryFilter(*filt.init_args)
     new = []
     for k, h in enumerate(hist):
-        t, idx, steps, infl = h[0], h[6], h[8], h[10]
+        t, idx, steps, infl = h.t, h.idx, h.steps, h.inflation
         F = np.eye(f.n)
         for v, w, dt in steps:
             F = f.predict(v, w, dt) @ F
@@ -589,7 +590,7 @@ def _redo(filt: TightOdometryFilter, hist, X, Ps, prs, sys_idx_all, mix, biased=
         comp = np.argmax(ll, 1)
         xprior, Pprior, Prprior = f.x.copy(), f.P.copy(), f.P_report.copy()
         f.update(prs.pr[idx], sat, si, prs.cn0[idx], mix, components=comp, inflation=infl)
-        new.append((t, xprior, Pprior, f.x.copy(), f.P.copy(), F, idx, comp, steps,
+        new.append(Epoch(t, xprior, Pprior, f.x.copy(), f.P.copy(), F, idx, comp, steps,
                     f.P_report.copy(), infl, Prprior))
     return new, f
 
@@ -598,11 +599,10 @@ def _smooth(filt: TightOdometryFilter, prs, sys_idx_all, keys_all, mix, cfg):
     """RTS, then each satellite's component re-decided on the smoothed track and the forward
     pass and RTS redone with those components fixed (``cfg.smooth_passes`` in all)."""
     hist = filt.history
-    X, Ps = _rts(hist)
+    X, Ps, Pr = _rts(hist, report=True)
     for _ in range(cfg.smooth_passes - 1):
         biased = (_biased(filt, hist, X, prs, sys_idx_all, keys_all, mix, cfg.bias_half_window,
                           cfg.bias_k) if cfg.bias_k > 0 else None)
         hist, _ = _redo(filt, hist, X, Ps, prs, sys_idx_all, mix, biased)
-        X, Ps = _rts(hist)
-    _, _, Pr = _rts(hist, report=True)
+        X, Ps, Pr = _rts(hist, report=True)
     return X, Pr, hist
