@@ -143,10 +143,9 @@ def berlin(shared_data):
 
 
 def _score(r, truth):
-    g = ecef_to_enu(truth.ecef, *r.origin)
-    e = np.column_stack([r.east - np.interp(r.t, truth.t, g[:, 0]),
-                         r.north - np.interp(r.t, truth.t, g[:, 1])])
-    eh = np.hypot(e[:, 0], e[:, 1])
+    from selfnav.sim.urban import horizontal_errors
+
+    eh = horizontal_errors(r.t, r.east, r.north, r.origin, truth)
     return float(np.sqrt(np.mean(eh ** 2))), float(np.sqrt(np.mean((eh / r.sigma_h) ** 2)))
 
 
@@ -238,11 +237,10 @@ def test_a_drift_injected_into_the_real_record_is_held(berlin):
     bad = replace(prs, pr=prs.pr - north * np.clip(prs.t - 80.0, 0.0, 120.0) * 0.5)
     follow = run_tight(bad, odo)
     held = run_tight(bad, odo, TightConfig(guard=GuardConfig()))
-    g = ecef_to_enu(truth.ecef, *held.origin)
+    from selfnav.sim.urban import horizontal_errors
 
     def err(res):
-        return np.hypot(res.east - np.interp(res.t, truth.t, g[:, 0]),
-                        res.north - np.interp(res.t, truth.t, g[:, 1]))
+        return horizontal_errors(res.t, res.east, res.north, res.origin, truth)
     after = held.t >= 80.0
     assert np.max(err(follow)[after]) > 55.0
     ep = held.stats["guard_episodes"]
