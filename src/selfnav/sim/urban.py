@@ -109,6 +109,8 @@ def simulate_urban_drive(seed: int = 0, cfg: UrbanConfig | None = None):
     ns = len(eph)
     clock = 2.0e4 - 40.0 * t + np.cumsum(rng.normal(0, 0.05, len(t)))
     isb = {GPS: 0.0, GALILEO: rng.normal(0, 10.0)}
+    b = np.array([isb[s] for s in eph.system])                  # per satellite
+    code = np.array([SMARTLOC_SYSTEM[s] for s in eph.system], int)
     n_streets = int(street.max()) + 1
     width = rng.uniform(16.0, 40.0, n_streets)
     height = rng.uniform(10.0, 40.0, n_streets)
@@ -132,13 +134,12 @@ def simulate_urban_drive(seed: int = 0, cfg: UrbanConfig | None = None):
         late = np.where(refl, delay[street[k]] * (1 + 0.3 * np.sin(2 * math.pi * t[k] / 40.0
                                                                    + phase)), 0.0)
         rho, _ = pseudorange_model(r[k], clock[k], pos)
-        b = np.array([isb[s] for s in eph.system])
         pr = rho + b + late + mp + rng.normal(0, 1, ns) * sig
         i = np.flatnonzero(vis)
         rows["t"].append(np.full(len(i), t[k]))
         rows["pr"].append(pr[i])
         rows["sat"].append(pos[i])
-        rows["sys"].append(np.array([SMARTLOC_SYSTEM[s] for s in eph.system[i]], int))
+        rows["sys"].append(code[i])
         rows["prn"].append(eph.prn[i].astype(int))
         rows["el"].append(el[i])
         rows["cn0"].append(cn0[i])
