@@ -57,8 +57,9 @@ def navigate_raw(gnss_raw, *, fmt: str = "auto", smooth: bool = False,
     -------
     Solution
         ``method "tight"`` (``"tight+smooth"``), σ per row, ``columns`` heading_deg, speed_scale,
-        yaw_rate_bias_dps, n_sats, n_delayed, clock_m; ``detail`` the
-        :class:`selfnav.gnss.tight.TightResult`.
+        yaw_rate_bias_dps, n_sats, n_delayed, clock_m; ``detail`` the pair
+        (:class:`selfnav.gnss.tight.TightResult`, the pseudoranges) :func:`write_tight_log`
+        reads.
     """
     from selfnav.gnss.guard import GuardConfig
     from selfnav.gnss.tight import TightConfig, run_tight
