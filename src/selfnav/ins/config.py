@@ -334,7 +334,24 @@ class VehicleConstraints:
     max_imu_gap_samples : an IMU step longer than this many sample intervals is a gap the
         INS does not bridge: the navigator starts again after it
     mag_step : s between magnetometer heading updates
-    mag_heading_sigma : σ of a magnetometer heading (a car's body field, soft iron), rad
+    mag_heading_sigma : σ of a magnetometer heading without ``mag_calibrate`` (a car's body
+        field, soft iron), rad
+    mag_corr_s : s over which a calibrated heading's residual deviation is correlated: each
+        reading's σ is inflated by ``√((1+ρ)/(1−ρ))``, ``ρ = exp(−mag_step / mag_corr_s)``
+    speed_hold : through a GNSS outage, the pace the platform kept while the fixes were used
+        (median of the INS's forward speed over ``speed_hold_window_s`` before the outage),
+        a prior on the forward speed once a second while the IMU is not still — a walker or
+        a rover keeps its pace; its σ is the spread of that speed (at least
+        ``speed_hold_floor``, m/s), each second's prior inflated by ``(1+ρ)/(1−ρ)``,
+        ``ρ = exp(−1 s / speed_hold_corr_s)``, for the pace's correlation in time
+    speed_hold_window_s, speed_hold_corr_s, speed_hold_floor : see ``speed_hold``
+    speed_hold_max_s : s after the last fix the pace is held for (a car that fell back to the
+        slow platform's start in a city keeps no pace through a 4-minute outage)
+    speed_hold_turn : rad/s, the pace is not held while the platform turns faster than this
+        and faster than 95 % of the turn rates of the stretch it was learnt on
+    mag_calibrate : the magnetometer's offset (hard iron, the soft iron's share of the
+        vertical field) fitted from the turns (:class:`selfnav.ins.magcal.HardIronFit`), the
+        heading's σ from that fit, and no update until the fit is trusted
     """
 
     platform: str = "auto"
@@ -362,6 +379,14 @@ class VehicleConstraints:
     max_imu_gap_samples: float = 6.0
     mag_step: float = 1.0
     mag_heading_sigma: float = 5.0 * DEG
+    mag_calibrate: bool = True
+    mag_corr_s: float = 10.0
+    speed_hold: bool = False
+    speed_hold_window_s: float = 20.0
+    speed_hold_corr_s: float = 5.0
+    speed_hold_floor: float = 0.05
+    speed_hold_turn: float = 3.0 * DEG
+    speed_hold_max_s: float = 30.0
 
 
 @dataclass
@@ -601,19 +626,23 @@ PLATFORMS = {
     # a walker holding the unit ahead: it moves along its nose, 0-10 deg off (a mount state)
     "pedestrian": dict(nhc=True, mount_states=True, mount_sigma=10.0 * DEG, zupt=True,
                        zupt_speed=0.1, any_start="now", course_heading=True,
-                       course_heading_sigma=15.0 * DEG),
+                       course_heading_sigma=15.0 * DEG, use_magnetometer=True,
+                       speed_hold=True),
     # skid-steer: slips in its turns, nearly on the spot
     "rover": dict(nhc=True, mount_states=True, mount_sigma=5.0 * DEG, zupt=True,
                   zupt_speed=0.1, any_start="now", course_heading=True,
-                  course_heading_sigma=10.0 * DEG),
+                  course_heading_sigma=10.0 * DEG, use_magnetometer=True,
+                  speed_hold=True),
     # yaws about its course in the waves (a ship's ±5° at 15 s is 0.5 m/s sideways at 6 m/s:
     # a sideways constraint took the simulated ship 700 m off), leeway, current; never still
     "boat": dict(nhc=False, zupt=False, any_start="now", course_heading=True,
-                 course_heading_sigma=15.0 * DEG),
+                 course_heading_sigma=15.0 * DEG, use_magnetometer=True),
     # crab angle in wind, sideslip in turns: no sideways constraint
     "aircraft": dict(nhc=False, zupt=False, any_start="now", course_heading=True,
                      course_heading_sigma=20.0 * DEG),
     # a multirotor flies sideways
+    # (its magnetometer sits among motors whose field follows their current: not used after
+    # the start — on simulated drones the fixes hold the heading to 0.4-1.9° anyway)
     "drone": dict(nhc=False, zupt=True, zupt_speed=0.1, any_start="now", course_heading=False),
 }
 #: What ``auto`` becomes when the car's start finds no car (a platform moving slower than a
@@ -622,7 +651,8 @@ PLATFORMS = {
 #: zero-velocity updates only when the INS is nearly still, the course a loose heading.
 SLOW_PLATFORM = dict(nhc=True, mount_states=True, mount_sigma=15.0 * DEG, zupt_speed=0.1,
                      zupt_speed_sigmas=0.0, grade_sigma=None,
-                     course_heading=True, course_heading_sigma=20.0 * DEG)
+                     course_heading=True, course_heading_sigma=20.0 * DEG,
+                     use_magnetometer=True, speed_hold=True)
 PLATFORM_ALIASES = {"ship": "boat", "walker": "pedestrian", "multirotor": "drone"}
 PLATFORM_NAMES = ("auto",) + tuple(PLATFORMS) + tuple(PLATFORM_ALIASES)
 

@@ -291,6 +291,31 @@ class WheelSpeed(Measurement):
                      np.array([[self.sigma**2]]))
 
 
+@dataclass
+class ForwardSpeed(Measurement):
+    """A prior on the speed along the vehicle's nose at the NHC point, m/s (a walker's or a
+    rover's pace held through a GNSS outage): :class:`WheelSpeed`'s model without its scale
+    factor or time stamp — a statement about now, not a sensor's sample::
+
+        h = v_v,F,   ∂h/∂δv = C_vn[F],   ∂h/∂ψ = −C_vn[F] [v^n×],   ∂h/∂δμ = −[v_v×][F]
+    """
+
+    speed: float
+    sigma: float
+    kind = "speed prior"
+
+    def model(self, flt) -> Model:
+        vv, C_vn = vehicle_velocity(flt)
+        lay = flt.layout
+        H = np.zeros((1, flt.nx))
+        H[0, IV] = C_vn[1]
+        H[0, IP] = -C_vn[1] @ skew3(flt.ins.velocity_n)
+        if lay.mu is not None:
+            H[0, lay.mu] = -skew3(vv)[1, [0, 2]]
+        return Model(self.kind, np.array([vv[1] - float(self.speed)]), H,
+                     np.array([[self.sigma**2]]))
+
+
 def _heading_error(flt, heading):
     _, _, hdg = att.euler_from_dcm_nb(flt.ins.C_nb)
     return float(np.angle(np.exp(1j * (hdg - heading))))
@@ -406,5 +431,5 @@ class AlongTrackWiden:
 
 
 __all__ = ["Model", "Measurement", "PositionFix", "VelocityFix", "NonHolonomic",
-           "ZeroVelocity", "ZeroRate", "WheelSpeed", "Heading", "RoadLine", "LevelRoad", "RunVelocity",
+           "ZeroVelocity", "ZeroRate", "WheelSpeed", "ForwardSpeed", "Heading", "RoadLine", "LevelRoad", "RunVelocity",
            "vehicle_velocity", "_POS"]
