@@ -154,6 +154,9 @@ def test_slow_platforms_start_through_the_cli(kind, start, platform, tmp_path, c
     js = json.loads(so)
     g = selfnav.read_gnss(d / "gnss.csv")
     assert js["nhc"] is True      # both move along their nose: NHC with a mounting-yaw state
+    # ... the profile's (or the slow platform's) mounting states, magnetometer and pace (the
+    # command line had passed --no-mount-states by default, overriding the profile)
+    assert "mounting_deg" in js and "magnetometer" in js and "pace_priors" in js
     if platform is None:
         # auto waits for 30 s of motion in the fixes (a car leaving a parking place creeps)
         assert js["start_s"] - g.t[0] <= 45.0
@@ -403,3 +406,27 @@ def test_a_walker_keeps_its_pace_through_10_s_outages():
                 assert sol.stats["pace_priors"] > 0
     assert np.max(ends[True]) < 12.0 and np.max(ends[False]) > 20.0
     assert np.sum(ends[True] < 6.0) >= 4
+
+
+def test_the_slow_platform_fallback_keeps_what_the_user_set(tmp_path, capsys):
+    """``auto`` falls back to the slow platform's settings when the start shows no car, but
+    not over the settings given by name: ``--no-magnetometer-aid`` (and ``speed_hold=False``
+    through the API) stand."""
+    import json
+    import warnings
+
+    d = tmp_path / "sim"
+    code, _, err = run_cli(["simulate", "pedestrian", "--out", d, "--seed", "23", "--start",
+                            "moving", "--duration", "90"], capsys)
+    assert code == 0, err
+    code, so, err = run_cli(["navigate", "--imu", d / "imu.csv", "--gnss", d / "gnss.csv",
+                             "--out", tmp_path / "sol.csv", "--json", "--no-magnetometer-aid"],
+                            capsys)
+    assert code == 0, err
+    js = json.loads(so)
+    assert "slower than a car" in err and "magnetometer" not in js and "pace_priors" in js
+    sim = selfnav.simulate("pedestrian", seed=23, duration=90, start="moving")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        st = selfnav.navigate(sim.imu, sim.gnss.as_gnss(), speed_hold=False).stats
+    assert "pace_priors" not in st and "magnetometer" in st

@@ -145,10 +145,17 @@ def register(app: typer.Typer) -> None:
             "--scale-factors/--no-scale-factors",
             help="Estimate scale factors and axis misalignment (default: as the grade "
                  "says; on for auto, consumer and industrial).")] = None,
-        mount_states: Annotated[bool, typer.Option(
+        mount_states: Annotated[Optional[bool], typer.Option(
             "--mount-states/--no-mount-states",
             help="Estimate the IMU's pitch and yaw to the vehicle (2 states, seen by the "
-                 "NHC).")] = False,
+                 "NHC; default: as the platform says — off for a car, on for a walker, a "
+                 "rover and a slow platform).")] = None,
+        magnetometer_aid: Annotated[Optional[bool], typer.Option(
+            "--magnetometer-aid/--no-magnetometer-aid",
+            help="After the start, the magnetometer (the IMU file's mx,my,mz or --mag) as a "
+                 "heading aid once its offset is fitted from the turns (default: as the "
+                 "platform says — on for a walker, a rover, a boat and a slow platform, off "
+                 "for a car and a drone).")] = None,
         out_rate: Annotated[float, typer.Option(
             "--out-rate", metavar="HZ", min=0.0,
             help="Output rows per second, on a regular grid of the GNSS time (0: a row at "
@@ -226,10 +233,14 @@ def register(app: typer.Typer) -> None:
             else:
                 extra = {} if scale_factors is None else {
                     "scale_factors": scale_factors, "misalignment": scale_factors}
+                if mount_states is not None:
+                    extra["mount_states"] = mount_states
+                if magnetometer_aid is not None:
+                    extra["use_magnetometer"] = magnetometer_aid
                 sol = api.navigate(data, g, graph, smooth=smooth, grade=grade,
                                    lever_arm_m=lever, nhc_lever_m=nhc_arm,
                                    imu_time_offset_s=imu_time_offset, nhc=nhc,
-                                   platform=platform, mount_states=mount_states, init=init,
+                                   platform=platform, init=init,
                                    out_rate_hz=out_rate, progress=progress, odometer=odo,
                                    **extra)
         except np.linalg.LinAlgError as e:   # a safety net: one line, not a traceback

@@ -251,7 +251,7 @@ HELP_PANELS = {
         "Method": ("method", "smooth", "grade", "drift_guard"),
         "Sensor geometry and timing (estimated when not given)": (
             "lever_arm", "imu_time_offset", "nhc_lever", "mount_states", "scale_factors"),
-        "Vehicle constraints": ("platform", "nhc"),
+        "Vehicle constraints": ("platform", "nhc", "magnetometer_aid"),
         "--method seed only": ("matcher", "ins_datum", "declination_deg"),
     },
     "moving": {

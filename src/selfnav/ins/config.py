@@ -292,6 +292,7 @@ class VehicleConstraints:
     ----------
     platform : the platform profile these constraints came from (:data:`PLATFORMS`; ``auto``:
         a car's, with :data:`SLOW_PLATFORM`'s constraints when the start shows no car)
+    user_set : the settings the caller gave by name, which the slow-platform fallback keeps
     nhc : a car does not slide sideways or jump
     nhc_sigma : m/s, lateral (and vertical) velocity at the NHC point
     nhc_sigma_up : m/s, vertical if it differs from lateral
@@ -355,6 +356,7 @@ class VehicleConstraints:
     """
 
     platform: str = "auto"
+    user_set: tuple = ()
     nhc: bool = True
     nhc_sigma: float = 0.3
     nhc_sigma_up: float | None = None
@@ -694,6 +696,7 @@ def navigator_config(grade: str = "auto", *, lever_arm_m=None, nhc_lever_m=None,
     if nhc_lever_m is not None:
         opts["nhc_lever_b"] = np.asarray(nhc_lever_m, dtype=float)
     opts["time_offset"] = imu_time_offset_s is None
+    opts["user_set"] = tuple(fields) + (("nhc",) if nhc is not None else ())
     auto = str(grade).lower().strip() == "auto"
     cfg = FilterConfig.for_grade("consumer" if auto else grade, **{**opts, **fields})
     if auto:

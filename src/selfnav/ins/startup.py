@@ -200,10 +200,10 @@ class StartUp:
         speed = recent_speed(gnss, sig)
         if speed >= cfg.init.any_start_speed or not displaced(gnss, sig):
             raise error
-        if cfg.vehicle.platform == "auto":
-            cfg = cfg.updated(**SLOW_PLATFORM)
-        elif cfg.vehicle.platform.startswith("auto"):          # the user set the NHC
-            cfg = cfg.updated(**{**SLOW_PLATFORM, "nhc": cfg.vehicle.nhc})
+        if cfg.vehicle.platform.startswith("auto"):
+            # what the user set by name stands (the NHC, the magnetometer, the pace, ...)
+            keep = set(cfg.vehicle.user_set)
+            cfg = cfg.updated(**{k: v for k, v in SLOW_PLATFORM.items() if k not in keep})
         init = any_start(imu, gnss, cfg, self.magnetometer)
         init["fallback"] = (f"{moved:.0f} s of motion at {speed:.1f} m/s without a straight "
                             f"run faster than {cfg.init.min_speed:g} m/s")
