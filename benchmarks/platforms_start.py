@@ -2,6 +2,7 @@
 first fix, and how well does it follow — SIMULATED data (selfnav.simulate).
 
     python benchmarks/platforms_start.py [--seeds 30 31 32] [--duration 300] [--mode profile|auto]
+    python benchmarks/platforms_start.py --clean [--seeds 40 41 42] [--mode profile|auto]
     python benchmarks/platforms_start.py --rtk-walk [--seeds 40 41 42]
     python benchmarks/platforms_start.py --ship [--seeds 1 2]
 
@@ -11,6 +12,9 @@ solution and from 60 s after the start (the heading hypotheses resolved), the la
 at the end of the issue's outages (10 s every 30 s for the walker and the rover, 30 s every
 120 s for the boat and the drone, from 60 s after the start; a second run), the CPU time of
 the clean run. ``--mode profile`` passes ``platform=<the platform>``; ``auto`` the defaults.
+
+``--clean``: each platform started moving on white fixes only (the scenario's drifting part
+off: the issue's "clean"), RMS from a minute after the start against the fixes' σ.
 
 ``--rtk-walk``: the issue's handheld walk, simulated — 5 Hz fixes of 2 cm without drift, the
 walker standing 30 s first — with ``--platform pedestrian`` and with ``--no-nhc``, outages of
@@ -106,6 +110,30 @@ def rtk_walk(seeds):
                   f"{outage_ends(sim, kw, t_from, 10.0, 30.0):.2f} |", flush=True)
 
 
+def clean(seeds, duration, mode):
+    print("| platform | seed | fix σ m | raw fixes RMS m | RMS from a minute after the start m "
+          "| / fix σ |")
+    print("| --- | ---: | ---: | ---: | ---: | ---: |")
+    for kind in PLATFORMS:
+        for seed in seeds:
+            spec = {"scenario": {"kind": kind, "duration": duration, "start": "moving"},
+                    "gnss": {"correlated_sigma_m": 0.0}}
+            sim = selfnav.simulate(spec, seed=seed)
+            gnss = sim.gnss.as_gnss()
+            sol = _navigate(sim.imu, gnss, {} if mode == "auto" else {"platform": kind})
+            tr, T = sol.trajectory, sim.truth
+            late = tr.select(tr.t >= sol.stats["start_s"] + 60.0)
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                rms = selfnav.evaluate(T, late)["horizontal_rms_m"]
+            j = np.clip(np.searchsorted(T.t, gnss.t), 0, len(T.t) - 1)
+            d = enu_offset(T.lat[j], T.lon[j], 0.0, gnss.lat, gnss.lon, 0.0)
+            raw = float(np.sqrt(np.mean(d[:, 0] ** 2 + d[:, 1] ** 2)))
+            s = float(np.median(gnss.sigma_m))
+            print(f"| {kind} | {seed} | {s:.2f} | {raw:.2f} | {rms:.2f} | {rms / s:.2f} |",
+                  flush=True)
+
+
 def ship(seeds):
     print("| seed | options | horizontal RMS m | heading RMS ° |")
     print("| ---: | --- | ---: | ---: |")
@@ -127,7 +155,11 @@ def main():
     ap.add_argument("--mode", choices=("profile", "auto"), default="profile")
     ap.add_argument("--rtk-walk", action="store_true")
     ap.add_argument("--ship", action="store_true")
+    ap.add_argument("--clean", action="store_true")
     a = ap.parse_args()
+    if a.clean:
+        return clean(a.seeds or [40, 41, 42], a.duration if a.duration != 300.0 else 240.0,
+                     a.mode)
     if a.rtk_walk:
         return rtk_walk(a.seeds or [40, 41, 42])
     if a.ship:
