@@ -223,15 +223,17 @@ class HeadingHypotheses:
                 f.propagate(a[0], a[1], a[2])
             self.acc[k] = [0.0, np.zeros(3), np.zeros(3)]
 
-    def on_fix(self, fuse) -> list:
-        """One fix through every hypothesis: ``fuse(flt) -> (nis, det S, used)`` judges and
-        fuses it in one filter (its horizontal normalised innovation and the determinant of
-        its covariance); the weight is multiplied by the robust likelihood (the innovation
-        counts at most up to ``gate``). Returns ``(nis, used)`` per hypothesis."""
+    def on_fix(self, fuse, gate: float | None = None) -> list:
+        """One fix (or any measurement) through every hypothesis: ``fuse(flt) -> (nis, det S,
+        used)`` judges and fuses it in one filter (its normalised innovation and the
+        determinant of its covariance); the weight is multiplied by the robust likelihood (the
+        innovation counts at most up to ``gate``, default the fixes' 2-dof gate). Returns
+        ``(nis, used)`` per hypothesis."""
+        gate = self.gate if gate is None else gate
         res = []
         for k, f in enumerate(self.filters):
             nis, det, used = fuse(f)
-            self.logw[k] += -0.5 * min(nis, self.gate) - 0.5 * math.log(max(det, 1e-300))
+            self.logw[k] += -0.5 * min(nis, gate) - 0.5 * math.log(max(det, 1e-300))
             res.append((nis, used))
         self._normalise()
         return res

@@ -261,6 +261,19 @@ class ZeroRate(Measurement):
         return Model(self.kind, r, H, np.diag(s**2))
 
 
+def _forward_speed_rows(flt, gain: float):
+    """``(v_v, C_vn, H)``: the vehicle-frame velocity at the NHC point and the Jacobian row of
+    ``gain · v_v,F`` in velocity, attitude and (where estimated) mounting — the part
+    :class:`WheelSpeed` and :class:`ForwardSpeed` share."""
+    vv, C_vn = vehicle_velocity(flt)
+    H = np.zeros((1, flt.nx))
+    H[0, IV] = gain * C_vn[1]
+    H[0, IP] = -gain * C_vn[1] @ skew3(flt.ins.velocity_n)
+    if flt.layout.mu is not None:
+        H[0, flt.layout.mu] = -gain * skew3(vv)[1, [0, 2]]
+    return vv, C_vn, H
+
+
 @dataclass
 class WheelSpeed(Measurement):
     """Wheel speed, m/s, at the NHC point in the vehicle frame, scaled by ``1 + k``::
@@ -275,14 +288,9 @@ class WheelSpeed(Measurement):
     kind = "odometer"
 
     def model(self, flt) -> Model:
-        vv, C_vn = vehicle_velocity(flt)
-        lay = flt.layout
         g = 1.0 + flt.odo_scale
-        H = np.zeros((1, flt.nx))
-        H[0, IV] = g * C_vn[1]
-        H[0, IP] = -g * C_vn[1] @ skew3(flt.ins.velocity_n)
-        if lay.mu is not None:
-            H[0, lay.mu] = -g * skew3(vv)[1, [0, 2]]
+        vv, C_vn, H = _forward_speed_rows(flt, g)
+        lay = flt.layout
         if lay.odo is not None:
             H[0, lay.odo.start] = vv[1]
         if lay.toff is not None:        # stamped in true time, as a fix: its lead grows with ε
@@ -305,13 +313,7 @@ class ForwardSpeed(Measurement):
     kind = "speed prior"
 
     def model(self, flt) -> Model:
-        vv, C_vn = vehicle_velocity(flt)
-        lay = flt.layout
-        H = np.zeros((1, flt.nx))
-        H[0, IV] = C_vn[1]
-        H[0, IP] = -C_vn[1] @ skew3(flt.ins.velocity_n)
-        if lay.mu is not None:
-            H[0, lay.mu] = -skew3(vv)[1, [0, 2]]
+        vv, _, H = _forward_speed_rows(flt, 1.0)
         return Model(self.kind, np.array([vv[1] - float(self.speed)]), H,
                      np.array([[self.sigma**2]]))
 

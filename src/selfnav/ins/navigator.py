@@ -64,6 +64,14 @@ _PACK_LEVER = PACK["lever"]          # (a row's first 21 packed values: pos, vel
 assert PACK["ba"].stop == 21
 
 
+def _ar1_inflation(step_s: float, corr_s: float) -> float:
+    """``(1+ρ)/(1−ρ)``, ``ρ = exp(−step/τ)``: the variance factor that makes measurements
+    every ``step_s`` of an error correlated over ``corr_s`` (first order) carry, in sum, the
+    information they have — not as if each were independent."""
+    rho = math.exp(-step_s / corr_s)
+    return (1.0 + rho) / (1.0 - rho)
+
+
 @dataclass(frozen=True)
 class NavState:
     """The navigator's state at one instant (degrees at the edge, DESIGN §2).
@@ -919,8 +927,8 @@ class Navigator:
             dv = vs[lag:] - vs[:-lag]
             walk = float(np.sqrt(np.mean(dv * dv) / veh.speed_hold_corr_s))
             sigma = math.hypot(sigma, walk * math.sqrt(te - tp[-1]))
-        rho = math.exp(-1.0 / veh.speed_hold_corr_s)
-        prior = ForwardSpeed(pace, sigma * math.sqrt((1.0 + rho) / (1.0 - rho)))
+        sigma *= math.sqrt(_ar1_inflation(1.0, veh.speed_hold_corr_s))
+        prior = ForwardSpeed(pace, sigma)
         self.counts["pace_priors"] += 1
         for f in self._filters():
             dx = f.update(prior.model(f))
@@ -1056,24 +1064,23 @@ class Navigator:
             hdg, sigma = est
             # what is left of the deviation after the fit (soft iron, tilt) changes with the
             # heading, slowly: each reading counts for what its share of ``mag_corr_s`` adds
-            rho = math.exp(-max(veh.mag_step, 1e-3) / veh.mag_corr_s)
-            sigma *= math.sqrt((1.0 + rho) / (1.0 - rho))
+            sigma *= math.sqrt(_ar1_inflation(max(veh.mag_step, 1e-3), veh.mag_corr_s))
         else:
             hdg = float(magnetic_heading(mag_b, roll, pitch, self._declination))
             sigma = veh.mag_heading_sigma
         if self._hyp is not None:
-            hyp = self._hyp
-            for k, f in enumerate(hyp.filters):
+            def fuse(f):
                 m = Heading(hdg, sigma).model(f)
                 S = float((m.H @ f.P @ m.H.T + m.R)[0, 0])
                 q = float(m.r[0] ** 2 / S)
-                hyp.logw[k] += -0.5 * min(q, self._gate_v) - 0.5 * math.log(S)
                 if q <= self._gate_v:
                     dx = f.update(m)
                     if f is flt:
                         self._dx = self._dx + dx
                         self.counts["magnetometer_updates"] += 1
-            hyp._normalise()
+                return q, S, q <= self._gate_v
+
+            self._hyp.on_fix(fuse, gate=self._gate_v)
             return
         m = Heading(hdg, sigma).model(flt)
         if flt.nis(m) > self._gate_v:
