@@ -104,6 +104,24 @@ def test_an_unknown_heading_is_split_over_the_whole_circle():
     assert hyp.split_sigma >= 0.5 * np.max(gaps) - 1e-9
     w = hyp.weights
     assert np.max(w) / np.min(w) < 1.05                     # a uniform prior
+    # a biased sensor's evidence is replaced, not accumulated: the same reading given ten
+    # times weighs the hypotheses as once, and a new one replaces it (the others' evidence
+    # stays); pruning keeps the terms aligned with their hypotheses
+    ll = -0.5 * (hyp.deltas / math.radians(20.0)) ** 2
+    hyp.set_evidence("magnetometer", ll)
+    once = hyp.weights.copy()
+    for _ in range(10):
+        hyp.set_evidence("magnetometer", ll)
+    np.testing.assert_allclose(hyp.weights, once, rtol=1e-9)
+    hyp.set_evidence("magnetometer", np.zeros(len(ll)))
+    np.testing.assert_allclose(hyp.weights, w, rtol=1e-9)
+    hyp.set_evidence("magnetometer", ll)
+    hyp.prune_ratio = 100.0
+    hyp.prune()
+    assert len(hyp.filters) < len(d)
+    assert len(hyp.evidence["magnetometer"]) == len(hyp.filters)
+    np.testing.assert_allclose(hyp.evidence["magnetometer"],
+                               -0.5 * (hyp.deltas / math.radians(20.0)) ** 2)
 
 
 def test_auto_waits_at_rest_for_motion():

@@ -147,6 +147,9 @@ class HeadingHypotheses:
         self.logw = np.array(logw)
         self.deltas = np.array(deltas)
         self.bias_deltas = np.array(bias_deltas)
+        #: evidence that is replaced, not accumulated (:meth:`set_evidence`): log-likelihood
+        #: terms per hypothesis, by source
+        self.evidence = {}
         self.acc = [[0.0, np.zeros(3), np.zeros(3)] for _ in self.filters]
         self.split_sigma = sub
         self.prune_ratio = prune_ratio
@@ -167,6 +170,7 @@ class HeadingHypotheses:
         self.logw = np.append(self.logw + math.log1p(-weight), math.log(weight))
         self.deltas = np.append(self.deltas, delta)
         self.bias_deltas = np.append(self.bias_deltas, 0.0)
+        self.evidence = {k: np.append(v, 0.0) for k, v in self.evidence.items()}
         self.spawned += 1
         self._normalise()
 
@@ -238,6 +242,16 @@ class HeadingHypotheses:
         self._normalise()
         return res
 
+    def set_evidence(self, key, loglik):
+        """Weigh the hypotheses by ``loglik`` (one term each) *in place of* the last terms
+        given under ``key``: a sensor whose error is a bias (an uncalibrated magnetometer:
+        the same error at the same heading) says the same thing each time, and counted
+        every time it would outweigh everything else."""
+        loglik = np.asarray(loglik, dtype=float)
+        self.logw = self.logw + loglik - self.evidence.get(key, 0.0)
+        self.evidence[key] = loglik
+        self._normalise()
+
     def prune(self):
         """Drop the hypotheses ``prune_ratio`` times less likely than the best."""
         keep = self.logw >= np.max(self.logw) - math.log(self.prune_ratio)
@@ -249,6 +263,7 @@ class HeadingHypotheses:
         self.logw = self.logw[idx]
         self.deltas = self.deltas[idx]
         self.bias_deltas = self.bias_deltas[idx]
+        self.evidence = {k: v[idx] for k, v in self.evidence.items()}
         self._normalise()
 
     def resolved(self, t) -> bool:

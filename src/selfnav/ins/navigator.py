@@ -351,9 +351,11 @@ class Navigator:
         self._heading_t = -np.inf
         self._declination = None
         self.magcal = None                 # the magnetometer's fit (selfnav.ins.magcal)
+        self._gyro_yaw = 0.0               # the raw gyros' heading change since then, rad
         self.start_info = {}
         self.counts = {"reinitialisations": 0, "degraded": 0, "time_offset_resets": 0,
                        "magnetometer_updates": 0, "magnetometer_refused": 0,
+                       "magnetometer_bounds": 0,
                        "pace_priors": 0}
         self._hist = []
         self._t_toff = -np.inf
@@ -574,6 +576,8 @@ class Navigator:
         self._fwd_hist.clear()
         self._imu_still = self._still_from_braking = False
         self._hyp = None
+        if self.magcal is not None:
+            self.magcal.new_stretch()      # the gyros' heading has a gap
 
     def _start(self, start):
         st = self.startup
@@ -735,6 +739,10 @@ class Navigator:
             a[2] += sdv
         self._blk_w.append(w - flt.bg)
         self._blk_f.append(f - flt.ba)
+        if self.magcal is not None:
+            # the raw gyros' heading change (clockwise, their bias in: a constant bias is a
+            # straight drift, which the magnetometer's fit through the turns solves for)
+            self._gyro_yaw -= float((flt.ins.C_nb.T @ dth.sum(axis=0))[2])
         self.bank.on_imu(t, dth, dv, dt)
         if flt.layout.toff is not None:
             self._hist.append((t, w, f))
@@ -1034,8 +1042,9 @@ class Navigator:
     def _heading(self, payload):
         """A magnetometer reading: its heading (tilt-compensated with the INS's roll and pitch,
         IGRF declination) corrected by the offset fitted from the turns so far
-        (:class:`selfnav.ins.magcal.HardIronFit`, ``vehicle.mag_calibrate``), σ from that
-        fit; no update until the fit is trusted.
+        (:class:`selfnav.ins.magcal.HardIronFit`, ``vehicle.mag_calibrate``: the circle
+        of the readings, or the turns the gyros measured), σ from that fit; until the fit is
+        trusted the raw reading only bounds the heading (:meth:`_heading_bound`).
 
         While heading hypotheses run, the reading weighs them (its likelihood in each, the
         innovation counted up to the gate, as a fix does) and corrects only those it is within
@@ -1057,9 +1066,12 @@ class Navigator:
                 from selfnav.ins.magcal import HardIronFit
 
                 self.magcal = HardIronFit(self._inclination)
-            self.magcal.add(t, mag_b, roll, pitch)
+            self.magcal.add(t, mag_b, roll, pitch, self._gyro_yaw,
+                            float((flt.ins.C_nb.T @ flt.bg)[2]))
             est = self.magcal.heading(mag_b, roll, pitch, self._declination)
             if est is None:
+                self._heading_bound(float(magnetic_heading(mag_b, roll, pitch,
+                                                           self._declination)))
                 return
             hdg, sigma = est
             # what is left of the deviation after the fit (soft iron, tilt) changes with the
@@ -1088,6 +1100,41 @@ class Navigator:
             return
         self.counts["magnetometer_updates"] += 1
         self._dx = self._dx + flt.update(m)
+
+    def _heading_bound(self, hdg):
+        """An uncalibrated magnetometer's heading ``hdg``: its error is the platform's iron, a
+        bias that does not average out (the same reading at the same heading), so it bounds
+        the heading and does not refine it — σ_b = ``MAG_START_FLOOR_DEG`` (the start's
+        floor for the same reading). A filter whose heading σ has grown beyond σ_b is brought
+        back to exactly σ_b (``R = σ_b² P / (P − σ_b²)``, posterior variance σ_b²); one within
+        it is left alone. Heading hypotheses are weighed by the latest reading at σ_b, in
+        place of the reading before (weighed by each reading, they were weighed by the same
+        bias again and again: a simulated rover's heading went from 8° to 19° RMS). (A
+        simulated boat on a straight course, industrial gyros under the consumer
+        prior, no turn to calibrate on: its heading wandered 100° off in four minutes while
+        the magnetometer stayed within 5°.)"""
+        from selfnav.ins.anystart import MAG_START_FLOOR_DEG
+
+        s_b2 = math.radians(MAG_START_FLOOR_DEG) ** 2
+
+        if self._hyp is not None:
+            q = []
+            for f in self._hyp.filters:
+                S = float(f.P[8, 8]) + s_b2
+                r = float(Heading(hdg, 1.0).model(f).r[0])
+                q.append(-0.5 * min(r * r / S, self._gate_v) - 0.5 * math.log(S))
+            self._hyp.set_evidence("magnetometer", q)
+            return
+        f = self.flt
+        P = float(f.P[8, 8])
+        if P <= s_b2:
+            return
+        m = Heading(hdg, 1.0).model(f)
+        if float(m.r[0] ** 2 / (P + s_b2)) > self._gate_v:
+            return
+        m.R[0, 0] = s_b2 * P / (P - s_b2)
+        self._dx = self._dx + f.update(m)
+        self.counts["magnetometer_bounds"] += 1
 
     # ------------------------------------------------------------------ one fix
     def _process_fix(self, fx: _Fix):
@@ -1550,9 +1597,12 @@ class Navigator:
             out["magnetometer"] = {
                 "updates": self.counts["magnetometer_updates"],
                 "refused": self.counts["magnetometer_refused"],
+                "bounds": self.counts["magnetometer_bounds"],
                 "calibrated": bool(mc is not None and mc.ready),
                 "heading_sigma_deg": (math.degrees(mc.sigma) if mc is not None and mc.ready
                                       else None),
+                "calibrated_from": None if mc is None else mc.source,
+                "calibrated_s": None if mc is None else mc.t_ready,
                 "offset_levelled": (None if mc is None or mc.centre is None
                                     else [float(x) for x in mc.centre])}
         if self.cfg.vehicle.speed_hold:
