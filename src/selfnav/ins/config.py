@@ -322,6 +322,10 @@ class VehicleConstraints:
         still within what the filter knows of its biases and tilt: a consumer gyro's 0.5 °/s
         yaw bias, learnt wrong through a young start's turns, is measured at the first stop
         (a policy)
+    zaru_steady_s : a zero rate judged still only through the bias-widened test needs the
+        INS slow, the IMU so still and its rates one bias (within ``zupt_gyro``) for this long
+        first, s (0: at once, a car's stop; the slow platform: 2 s — a boat in waves whose INS
+        a fix had slowed for a second took a slow turn for a bias)
     zaru_sigma : rad/s, the least σ of one block's mean rate (the block's own scatter when
         larger: vibration, quantisation)
     aid_step : interval of NHC / ZUPT / road updates, s
@@ -374,6 +378,7 @@ class VehicleConstraints:
     zupt_accel: float = 0.15
     zaru: bool = True
     zaru_sigma: float = 0.01 * DEG
+    zaru_steady_s: float = 0.0
     aid_step: float = 0.2
     odometer_sigma: float = 0.05
     odometer_step: float = 0.2
@@ -652,7 +657,7 @@ PLATFORMS = {
 #: with a mounting-yaw state (it removed two diverging walker and rover starts, 313 m and 26 m),
 #: zero-velocity updates only when the INS is nearly still, the course a loose heading.
 SLOW_PLATFORM = dict(nhc=True, mount_states=True, mount_sigma=15.0 * DEG, zupt_speed=0.1,
-                     zupt_speed_sigmas=0.0, grade_sigma=None,
+                     zupt_speed_sigmas=0.0, zaru_steady_s=2.0, grade_sigma=None,
                      course_heading=True, course_heading_sigma=20.0 * DEG,
                      use_magnetometer=True, speed_hold=True)
 PLATFORM_ALIASES = {"ship": "boat", "walker": "pedestrian", "multirotor": "drone"}

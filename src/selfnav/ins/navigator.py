@@ -336,6 +336,9 @@ class Navigator:
         self._pace = collections.deque()      # (t, forward speed) while the fixes are used
         self._t_pace = -np.inf
         self._fwd_hist = collections.deque(maxlen=10)   # forward accelerations, one per block
+        # (slow and widened still?, mean rate) of the last blocks: a zero rate judged through
+        # the widened test may need them all so and their rates one bias (zaru_steady_s)
+        self._rate_hist = collections.deque(maxlen=1)
         self._imu_still = False
         self._still_from_braking = False
         self._acc = [0.0, np.zeros(3), np.zeros(3)]
@@ -574,6 +577,7 @@ class Navigator:
         self._acc = [0.0, np.zeros(3), np.zeros(3)]
         self._blk_w, self._blk_f = [], []
         self._fwd_hist.clear()
+        self._rate_hist.clear()
         self._imu_still = self._still_from_braking = False
         self._hyp = None
         if self.magcal is not None:
@@ -756,6 +760,16 @@ class Navigator:
                 self._emit_row(T, tau[k], pos[k], vel[k], C[k])
                 self._next_row = self._row_after(T)
 
+    def _steady_rate(self, veh) -> bool:
+        """The aiding blocks of the last ``zaru_steady_s`` were all slow and passed the widened
+        stillness test, and their mean rates lie within ``zupt_gyro`` of their mean: one
+        constant bias (a single block: always)."""
+        h = self._rate_hist
+        if len(h) < h.maxlen or not all(b[0] for b in h):
+            return False
+        m = np.array([b[1] for b in h])
+        return float(np.max(np.linalg.norm(m - m.mean(axis=0), axis=1))) <= veh.zupt_gyro
+
     def _filters(self):
         """The filters every measurement goes to: ``M``, or every heading hypothesis."""
         return [self.flt] if self._hyp is None else self._hyp.filters
@@ -833,7 +847,19 @@ class Navigator:
                                    veh.zupt_speed_cap))
         slow = bool(veh.zupt and np.linalg.norm(flt.ins.velocity_n) < v_max)
         self._still = slow and imu_still
-        zaru = veh.zaru and (self._still or (slow and _still(w_blk, f_blk, flt, veh, widen=True)))
+        # a zero rate judged still only through the widened test (the rates within what the
+        # filter does not know of its gyro biases): on a slow platform the INS slow and the
+        # IMU so still for ``zaru_steady_s``, the rates one bias (constant within the rate
+        # bound). A simulated boat in waves (defaults, seed 40), whose INS a fix had slowed to
+        # a crawl for a second while it sailed at 1.1 m/s, took a slow turn and the waves'
+        # roll for a bias: the z gyro bias "measured" to 0.86 °/s at σ 0.04 °/s, the heading
+        # turned 160° in three minutes, the fixes refused as a drag, 80 m RMS
+        wide = slow and bool(veh.zaru) and _still(w_blk, f_blk, flt, veh, widen=True)
+        n_steady = max(1, int(round(veh.zaru_steady_s / veh.aid_step)))
+        if self._rate_hist.maxlen != n_steady:
+            self._rate_hist = collections.deque(self._rate_hist, maxlen=n_steady)
+        self._rate_hist.append((wide, w_blk.mean(axis=0) if len(w_blk) else np.zeros(3)))
+        zaru = veh.zaru and (self._still or (wide and self._steady_rate(veh)))
         self.bank.judged(self._still)
         if self.vib_reference is not None:
             kv = vibration_scale(vibration_level(w_blk, f_blk), self.vib_reference,
