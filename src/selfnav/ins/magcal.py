@@ -189,15 +189,23 @@ class HardIronFit:
         if self.ready and self.t_ready is None:
             self.t_ready = self._t_kept
 
-    def _dip_ok(self, dip):
-        return self.inclination is None or abs(dip - self.inclination) <= self.dip_tolerance
+    def _candidate(self, source, centre, radius, dip, s_r, cov_centre, shape_ok=True):
+        """A fit's result: its heading σ from the readings' scatter ``s_r`` and the centre's
+        covariance ``cov_centre`` over the radius (the floor added), trusted when that σ is
+        below ``max_sigma``, the dip agrees with IGRF's and ``shape_ok``."""
+        s_centre = math.sqrt(max(float(np.max(np.linalg.eigvalsh(cov_centre))), 0.0))
+        sigma = math.hypot(s_r, s_centre) / radius
+        dip_ok = self.inclination is None or abs(dip - self.inclination) <= self.dip_tolerance
+        return {"centre": centre, "radius": radius, "dip": dip, "source": source,
+                "sigma": math.hypot(sigma, MAG_CAL_FLOOR),
+                "ready": bool(sigma <= self.max_sigma and dip_ok and shape_ok)}
 
     def _fit_turns(self):
         """The fit through the turns (module docstring): ``(B_h cos e, B_h sin e, b_x, b_y)``
         and the gyros' heading drift ``ε`` (minus their bias about the vertical),
-        ``m_k = Rot(φ_k − ε τ_k) (B_h cos e, B_h sin e) + b_h`` by Gauss–Newton from the
-        linear solution at the navigator's bias; None while the stretch is too short or has
-        not turned ``min_turn``."""
+        ``m_k = Rot(φ_k − ε τ_k) (B_h cos e, B_h sin e) + b_h``: the linear solution at the
+        best drift of a grid about the navigator's bias, then Gauss–Newton; None while the
+        stretch is too short or has not turned ``min_turn``."""
         if len(self._seg) < 20:
             return None
         a = np.asarray(self._seg)
@@ -256,7 +264,7 @@ class HardIronFit:
         th = phi - x[4] * tau                   # the turns the field shows, drift removed
         if float(th.max() - th.min()) < self.min_turn:
             return None
-        # residuals correlated from one reading to the next (the INS heading error wanders):
+        # residuals correlated from one reading to the next (the levelling's tilt error wanders):
         # the covariance widened by the effective number of independent readings
         rk = r.reshape(2, n)[:, keep[:n]]
         rho = 0.0
@@ -268,12 +276,8 @@ class HardIronFit:
             cov = s_r * s_r * np.linalg.inv(J[keep].T @ J[keep]) * (1.0 + rho) / (1.0 - rho)
         except np.linalg.LinAlgError:
             return None
-        s_centre = math.sqrt(max(float(np.max(np.linalg.eigvalsh(cov[2:4, 2:4]))), 0.0))
-        sigma = math.hypot(s_r, s_centre) / B
-        dip = math.atan2(float(np.median(a[:, 4])), B)
-        return {"centre": x[2:4].copy(), "radius": B, "dip": dip, "source": "turns",
-                "sigma": math.hypot(sigma, MAG_CAL_FLOOR),
-                "ready": bool(sigma <= self.max_sigma and self._dip_ok(dip))}
+        return self._candidate("turns", x[2:4].copy(), B,
+                               math.atan2(float(np.median(a[:, 4])), B), s_r, cov[2:4, 2:4])
 
     def _fit_circle(self):
         xy = np.asarray(self._xy)
@@ -291,15 +295,10 @@ class HardIronFit:
             cov = s_r * s_r * np.linalg.inv(J.T @ J)
         except np.linalg.LinAlgError:
             return None
-        s_centre = math.sqrt(max(float(np.max(np.linalg.eigvalsh(cov[:2, :2]))), 0.0))
-        sigma = math.hypot(s_r, s_centre) / R
         ang = np.arctan2(xy[:, 1] - b[1], xy[:, 0] - b[0])
         swept = len(np.unique(np.floor((ang + math.pi) / (math.pi / 6.0)).astype(int) % 12))
-        dip = math.atan2(z, R)
-        return {"centre": b, "radius": R, "dip": dip, "source": "circle",
-                "sigma": math.hypot(sigma, MAG_CAL_FLOOR),
-                "ready": bool(sigma <= self.max_sigma and swept >= self.min_sweep_bins
-                              and self._dip_ok(dip))}
+        return self._candidate("circle", b, R, math.atan2(z, R), s_r, cov[:2, :2],
+                               swept >= self.min_sweep_bins)
 
     def heading(self, mag_b, roll: float, pitch: float, declination: float = 0.0):
         """``(heading, σ)`` of a reading corrected by the fitted offset (rad, clockwise from true
