@@ -146,6 +146,42 @@ def test_cross_track_needs_the_line_not_the_position_along_it(helsinki):
     assert out["sigma"] == 1.0 and abs(wrap(out["heading"] - g.seg_heading[s])) < 1e-12
 
 
+@pytest.mark.parametrize("off_deg, expected", [(0.0, True), (5.0, True), (10.0, False),
+                                                 (-14.0, False)])
+def test_a_road_line_the_ins_does_not_head_along_is_no_constraint(helsinki, off_deg, expected):
+    """Not turning, a car drives along its road: a line 10–14° off an INS heading known to
+    0.5° is the next segment of a bend or a branch the cloud reached first (simulated
+    campaign drive 6218674482900036279: such lines, taken at 1 m, pulled a dead reckoning
+    30 m along its road at σ 5 m); within 8° (lane changes, digitising) it is taken."""
+    from types import SimpleNamespace
+
+    from selfnav import attitude as att
+
+    g = helsinki
+    s = int(np.flatnonzero(g.seg_len > 120.0)[0])
+    a = g.xy[g.seg_u[s]]
+    d = np.array([np.sin(g.seg_heading[s]), np.cos(g.seg_heading[s])])
+    nrm = np.array([d[1], -d[0]])
+    aid = EkfRoadAid(g, grade_sigma=None)
+    pf = aid.pf
+    pf.seg = np.full(400, s)
+    pf.along = np.full(400, 60.0)
+    pf.logw = np.zeros(400)
+    pf.dv = np.zeros(400)
+    p = a + 60.0 * d + 1.0 * nrm
+    lat, lon = g.to_geodetic(p[0], p[1])
+    C = att.dcm_nb_from_euler(0.0, 0.0, g.seg_heading[s] + np.radians(off_deg))
+    ins = SimpleNamespace(lat=float(lat), lon=float(lon), h=0.0, velocity_n=np.zeros(3), C_nb=C)
+    P = np.eye(15) * 4.0
+    P[8, 8] = np.radians(0.5) ** 2
+    flt = SimpleNamespace(ins=ins, P=P, nx=15)
+    aid.t_last = 0.0
+    outs = aid.constraints(0.2, flt)
+    assert (len(outs) == 1) == expected, outs
+    if expected:
+        assert abs(outs[0]["offset"] - 1.0) < 0.05
+
+
 @pytest.mark.slow
 @pytest.mark.filterwarnings("ignore:.*covers .* of the truth's time span:selfnav.errors.SelfnavWarning")  # starts after alignment
 def test_consumer_ekf_with_the_map_through_an_outlier_window():
