@@ -327,6 +327,7 @@ class Navigator:
         self._rec = {k: [] for k in ("t", "state", "P", "Pm", "Phi", "dx", "brk")}
         self._reset_flag = False
         self._t_last_fused = -np.inf
+        self._ins_vouched = False
         self._t_last_fix = -np.inf
         self._fix_dt = []
         self._fix_dt_median = 0.0
@@ -635,6 +636,7 @@ class Navigator:
         if not cfg.adaptation.vibration:
             self.vib_reference = None
         self.bank = FaultBank(cfg, self.adapter)
+        self._ins_vouched = False
         t0 = float(init["t"])
         self.bank.restart(t0)
         # a heading outside the filter's linear range: a Gaussian sum until the fixes resolve it
@@ -904,6 +906,10 @@ class Navigator:
         if self.road_aid is not None:
             self.road_aid.dead_reckoning = (self.bank.episode is not None
                                             or te - self._t_last_fused > self.cfg.integrity.outage_s)
+            # once a dead reckoning of this start stood the fixes' test, its heading is vouched
+            # for until a restart (a reference that ages out in a long window does not undo it)
+            self._ins_vouched = self._ins_vouched or bool(self.bank.mature(te))
+            self.road_aid.ins_vouched = self._ins_vouched
             if self._hyp is None:
                 m = self.road_aid(te, flt)
                 if m is not None:
@@ -1362,6 +1368,7 @@ class Navigator:
         # the heading is the course of the fixes' velocity: one error with its cross part
         set_course_heading(flt, np.eye(2) * (2 * s_v) ** 2, att_s[2])
         self.bank.restart(fx.t)
+        self._ins_vouched = False
         self._reset_flag = True
         self._t_last_fused = fx.t
         self.counts["reinitialisations"] += 1

@@ -162,9 +162,10 @@ class EkfRoadAid:
     While the navigator takes no fixes (``dead_reckoning``: a fault episode, an outage) the
     cloud follows the dead reckoning: no constraint is given but the level-road prior once the
     filter's horizontal σ is above ``dr_sigma_m``.
-    line_agree : a road line or a corner's leg is a constraint only while the INS heading
-        runs along it within this or three of the filter's heading σ, rad (a car not turning
-        drives along its road; the lane changes and the map's digitising are within it)
+    line_agree : a corner's leg — and, while dead-reckoning, a road line — is a constraint
+        only while the INS heading runs along it within this or three of the filter's heading
+        σ, rad (a car not turning drives along its road; the lane changes and the map's
+        digitising are within it)
     max_sigma_m : no road constraint while the filter's horizontal position σ (its largest
         axis) is above this, m: a fact of road maps — junctions 50–100 m apart — beyond which
         the cloud cannot tell the road the car is on from the one its dead reckoning drifted
@@ -225,6 +226,10 @@ class EkfRoadAid:
         #: the map then gives no constraint once the filter's σ is above ``dr_sigma_m``
         #: (:meth:`constraints`)
         self.dead_reckoning = False
+        #: set by the navigator: the fault bank holds a reference — a dead reckoning of the INS
+        #: that has stood the fixes' test; before, its heading may be off by more than its σ
+        #: says, and the road lines are what correct it (:meth:`constraints`)
+        self.ins_vouched = True
         self.lock = None           # (t, normal) of the last constraint that found the filter on it
 
     # ------------------------------------------------------------------ the stream
@@ -446,11 +451,16 @@ class EkfRoadAid:
         out = None
         P2 = flt.P[0:2, 0:2]
         if legs is None and not turning:
-            # not turning, the car runs along its road: a line the INS heading does not match
-            # is the next segment of a bend or a branch at a junction the cloud reached first
-            # (simulated campaign drive 6218674482900036279: lines 9–14° off the INS heading,
-            # at 1 m, pulled a dead reckoning 30 m along its road at σ 5 m)
-            if self._heading_agrees(est["seg"], hdg, flt):
+            # not turning, the car runs along its road: while dead-reckoning, a line the INS
+            # heading does not match is the next segment of a bend or a branch at a junction
+            # the cloud reached first (simulated campaign drive 6218674482900036279: lines
+            # 9–14° off the INS heading, at 1 m, pulled a dead reckoning 30 m along its road
+            # at σ 5 m). With fixes taken the lines' road heading is what corrects a start's
+            # heading (a consumer start 24° off at σ 3°): the fixes bound what a wrong one does
+            # — and so while no dead reckoning of the INS has yet stood the fixes' test
+            # (``ins_vouched``: that start's first episode came from its heading)
+            if not (self.dead_reckoning and self.ins_vouched) \
+                    or self._heading_agrees(est["seg"], hdg, flt):
                 a0, _, nrm = self._line(est["seg"])
                 out = {"normal_n": nrm, "offset": float((p_ins - a0) @ nrm), "kind": "line",
                        "heading": float(self.g.seg_heading[est["seg"]])}
