@@ -226,9 +226,9 @@ class EkfRoadAid:
         #: the map then gives no constraint once the filter's σ is above ``dr_sigma_m``
         #: (:meth:`constraints`)
         self.dead_reckoning = False
-        #: set by the navigator: since the start the fault bank has held a reference — a dead reckoning of the INS
-        #: that has stood the fixes' test; before, its heading may be off by more than its σ
-        #: says, and the road lines are what correct it (:meth:`constraints`)
+        #: set by the navigator: since the start the fault bank has held a reference — a dead
+        #: reckoning of the INS that has stood the fixes' test; before, its heading may be off
+        #: by more than its σ says, and the road lines are what correct it (:meth:`constraints`)
         self.ins_vouched = True
         self.lock = None           # (t, normal) of the last constraint that found the filter on it
 
