@@ -113,32 +113,39 @@ def test_corner_arc_is_the_circle_tangent_to_both_legs(helsinki):
     assert aid._arc(s, q, T1 - 15.0 * d1, R) is None
 
 
-def test_cross_track_needs_the_line_not_the_position_along_it(helsinki):
-    """A cloud spread 100 m along one straight road (cluster share well below 0.8) still
-    gives the cross-track constraint; the offset is the filter's distance from that line."""
+def _filter_beside_a_straight(g, along, cross_m, P, heading_off=0.0):
+    """An aid whose cloud sits at ``along`` (m) on the first straight over 120 m, and a
+    stand-in filter 60 m along it and ``cross_m`` to its right, heading along it plus
+    ``heading_off`` (rad), covariance ``P``: ``(aid, filter, segment, right normal)``."""
     from types import SimpleNamespace
 
     from selfnav import attitude as att
 
-    g = helsinki
     s = int(np.flatnonzero(g.seg_len > 120.0)[0])
-    a = g.xy[g.seg_u[s]]
     d = np.array([np.sin(g.seg_heading[s]), np.cos(g.seg_heading[s])])
     nrm = np.array([d[1], -d[0]])
     aid = EkfRoadAid(g, grade_sigma=None)
     pf = aid.pf
-    pf.seg = np.full(400, s)
-    pf.along = np.linspace(10.0, 110.0, 400)
-    pf.logw = np.zeros(400)
-    pf.dv = np.zeros(400)
-    p = a + 60.0 * d + 2.5 * nrm
+    pf.seg = np.full(len(along), s)
+    pf.along = np.asarray(along, float)
+    pf.logw = np.zeros(len(along))
+    pf.dv = np.zeros(len(along))
+    p = g.xy[g.seg_u[s]] + 60.0 * d + cross_m * nrm
     lat, lon = g.to_geodetic(p[0], p[1])
-    C = att.dcm_nb_from_euler(0.0, 0.0, g.seg_heading[s])
+    C = att.dcm_nb_from_euler(0.0, 0.0, g.seg_heading[s] + heading_off)
     ins = SimpleNamespace(lat=float(lat), lon=float(lon), h=0.0, velocity_n=np.zeros(3), C_nb=C)
-    flt = SimpleNamespace(ins=ins, P=np.eye(15) * 4.0, nx=15)
     aid.t_last = 0.0
+    return aid, SimpleNamespace(ins=ins, P=P, nx=15), s, nrm
+
+
+def test_cross_track_needs_the_line_not_the_position_along_it(helsinki):
+    """A cloud spread 100 m along one straight road (cluster share well below 0.8) still
+    gives the cross-track constraint; the offset is the filter's distance from that line."""
+    g = helsinki
+    aid, flt, s, nrm = _filter_beside_a_straight(g, np.linspace(10.0, 110.0, 400), 2.5,
+                                                 np.eye(15) * 4.0)
     outs = aid.constraints(0.2, flt)
-    assert pf.estimate()["share"] < 0.8
+    assert aid.pf.estimate()["share"] < 0.8
     assert len(outs) == 1
     out = outs[0]
     assert out is not None and abs(out["offset"] - 2.5) < 0.05
@@ -158,29 +165,10 @@ def test_a_road_line_the_ins_does_not_head_along_is_no_constraint(helsinki, off_
     is taken. With fixes taken it is taken: its road heading is what corrects a start's
     heading that is off by more than its σ says (test_consumer_ekf_with_the_map_through_an_
     outlier_window: 24° at σ 3°; refused, its cross-track RMS went 0.5 → 1.1 m)."""
-    from types import SimpleNamespace
-
-    from selfnav import attitude as att
-
-    g = helsinki
-    s = int(np.flatnonzero(g.seg_len > 120.0)[0])
-    a = g.xy[g.seg_u[s]]
-    d = np.array([np.sin(g.seg_heading[s]), np.cos(g.seg_heading[s])])
-    nrm = np.array([d[1], -d[0]])
-    aid = EkfRoadAid(g, grade_sigma=None)
-    pf = aid.pf
-    pf.seg = np.full(400, s)
-    pf.along = np.full(400, 60.0)
-    pf.logw = np.zeros(400)
-    pf.dv = np.zeros(400)
-    p = a + 60.0 * d + 1.0 * nrm
-    lat, lon = g.to_geodetic(p[0], p[1])
-    C = att.dcm_nb_from_euler(0.0, 0.0, g.seg_heading[s] + np.radians(off_deg))
-    ins = SimpleNamespace(lat=float(lat), lon=float(lon), h=0.0, velocity_n=np.zeros(3), C_nb=C)
     P = np.eye(15) * 4.0
     P[8, 8] = np.radians(0.5) ** 2
-    flt = SimpleNamespace(ins=ins, P=P, nx=15)
-    aid.t_last = 0.0
+    aid, flt, _, _ = _filter_beside_a_straight(helsinki, np.full(400, 60.0), 1.0, P,
+                                               heading_off=np.radians(off_deg))
     aid.dead_reckoning = dead_reckoning
     outs = aid.constraints(0.2, flt)
     assert (len(outs) == 1) == expected, outs

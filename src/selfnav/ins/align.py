@@ -583,7 +583,7 @@ def init_from_gnss(imu, gnss: GnssData, cfg: FilterConfig, sig_h):
             # a car that speeds up and brakes within the window passes the line's χ² on 10 m
             # fixes (simulated drive 5331715786027073346: 2 m/s² for 4 s each way, started
             # 5.7 m/s slow at σ 1 m/s, then 865 m RMS); the accelerometers measured it
-            u = v0[:2] / max(float(np.hypot(v0[0], v0[1])), 1e-9)
+            u = v0[:2] / speed
             C_w = att.dcm_nb_from_euler(roll, pitch, np.arctan2(u[0], u[1]))
             d = accelerometer_track(imu, gnss.t[sl], t0, C_w, u)
             y = p[sl, :2] - np.outer(d, u)
