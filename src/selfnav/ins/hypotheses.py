@@ -206,14 +206,21 @@ class FaultBank:
             if i == len(t):
                 continue
             sth, sdv, _ = f.mechanize(t[i:], dth[i:], dv[i:], dt[i:])
-            f.propagate(float(dt[i:].sum()), sth, sdv)
+            span = float(dt[i:].sum())
+            f.propagate(span, sth, sdv)
             if still and veh.zupt:
                 f.update(ZeroVelocity(veh.zupt_sigma).model(f))
                 if veh.zaru:
                     w = dth[i:] / dt[i:, None] - f.bg
-                    f.update(ZeroRate(w, veh.zaru_sigma).model(f))
+                    f.update(ZeroRate(w, veh.zaru_sigma, span).model(f))
             elif veh.nhc:
-                f.update(NonHolonomic(veh.nhc_sigma, veh.nhc_sigma_up or veh.nhc_sigma).model(f))
+                # its errors are correlated over seconds: it weighs as much per second as one
+                # update a reference step, however often a fix's test brings the references up
+                # to date in between (σ ∝ 1/√span: two updates 0.02 s apart, seen every other
+                # second, had given the dead reckoning up to twice the information across)
+                k = np.sqrt(max(1.0, self.cfg.integrity.reference_step_s / max(span, 1e-6)))
+                f.update(NonHolonomic(k * veh.nhc_sigma,
+                                      k * (veh.nhc_sigma_up or veh.nhc_sigma)).model(f))
 
     def maintain(self, t, flt):
         """Branch a new reference from ``M`` every ``branch_every_s`` while the GNSS is healthy;

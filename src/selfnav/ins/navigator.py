@@ -331,7 +331,7 @@ class Navigator:
         self._t_last_fix = -np.inf
         self._fix_dt = []
         self._fix_dt_median = 0.0
-        self._blk_w, self._blk_f = [], []
+        self._blk_w, self._blk_f, self._blk_span = [], [], 0.0
         self._still = False
         self._t_grade = -np.inf
         self._pace = collections.deque()      # (t, forward speed) while the fixes are used
@@ -576,7 +576,7 @@ class Navigator:
         self._events = []
         self._given_init = None
         self._acc = [0.0, np.zeros(3), np.zeros(3)]
-        self._blk_w, self._blk_f = [], []
+        self._blk_w, self._blk_f, self._blk_span = [], [], 0.0
         self._fwd_hist.clear()
         self._rate_hist.clear()
         self._imu_still = self._still_from_braking = False
@@ -745,6 +745,7 @@ class Navigator:
             a[2] += sdv
         self._blk_w.append(w - flt.bg)
         self._blk_f.append(f - flt.ba)
+        self._blk_span += float(dt.sum())
         if self.magcal is not None:
             # the raw gyros' heading change (clockwise, their bias in: a constant bias is a
             # straight drift, which the magnetometer's fit through the turns solves for)
@@ -824,7 +825,8 @@ class Navigator:
         flt, veh = self.flt, self.cfg.vehicle
         w_blk = np.concatenate(self._blk_w) if self._blk_w else np.zeros((0, 3))
         f_blk = np.concatenate(self._blk_f) if self._blk_f else np.zeros((0, 3))
-        self._blk_w, self._blk_f = [], []
+        span = self._blk_span
+        self._blk_w, self._blk_f, self._blk_span = [], [], 0.0
         # the IMU still (its rate bound widened by what the filter does not know of its gyro
         # biases: a consumer part's 2 °/s turn-on bias hid every stop from the absolute bound)
         imu_still = bool(veh.zupt) and _still(w_blk, f_blk, flt, veh, widen="gyro")
@@ -876,7 +878,7 @@ class Navigator:
                 # belief is motion, not a bias — taken, it moved the velocity by 6 m/s and the
                 # mounting yaw by 70° in one update. A still IMU at rest (a stop) is taken
                 # whatever the innovation: a bias learnt wrong is measured there
-                m = ZeroRate(w_blk + (flt.bg - f.bg), veh.zaru_sigma).model(f)
+                m = ZeroRate(w_blk + (flt.bg - f.bg), veh.zaru_sigma, span).model(f)
                 if self._still or f.nis(m) <= self._gate_vel3:
                     dx = f.update(m)
             if self._still:
