@@ -113,6 +113,21 @@ def test_corner_arc_is_the_circle_tangent_to_both_legs(helsinki):
     assert aid._arc(s, q, T1 - 15.0 * d1, R) is None
 
 
+def test_an_arc_the_filter_cannot_place_itself_on_takes_only_small_offsets(helsinki):
+    """Where on the arc the car is the filter knows to its σ: with its 2σ beyond the arc's
+    length (R·θ) an offset beyond the arc's own 2σ is as well explained by the car being
+    elsewhere along the road (never-seen campaign drive 5847359501566820251: σ 7 m along into
+    an 8 m arc, moved 10 m by 4.6 m across it) — placed, the test is max(4 m, 2σ across)."""
+    g = helsinki
+    s, q = _corner(g)
+    aid = EkfRoadAid(g)
+    R = 9.0
+    span = R * abs(float(wrap(g.seg_heading[q] - g.seg_heading[s])))
+    for frac, placed in ((0.45, True), (0.55, False)):
+        sig = frac * span                                 # the largest axis
+        assert aid._arc_placed((s, q), R, np.diag([sig**2, 1.0])) is placed
+
+
 def _filter_beside_a_straight(g, along, cross_m, P, heading_off=0.0, s=None, at=60.0):
     """An aid whose cloud sits at ``along`` (m) on segment ``s`` (default: the first straight
     over 120 m), and a stand-in filter ``at`` m along it and ``cross_m`` to its right, heading

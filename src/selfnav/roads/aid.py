@@ -134,8 +134,9 @@ class EkfRoadAid:
       while not turning; while turning, against **the arc** a car drives through the corner —
       the circle tangent to both legs with the radius being driven, ``R = v/ω`` (INS speed over
       the bias-corrected yaw rate, median over the turn after its first 0.4 s), normal towards
-      the centre, within ``max(arc_agree_m, 2σ)``. The normal sweeps through the turn: a corner
-      pins the along-track position too.
+      the centre, within ``max(arc_agree_m, 2σ)`` — within ``2·sigma_arc`` while the filter's
+      2σ is beyond the arc's length (:meth:`_arc_placed`). The normal sweeps through the turn:
+      a corner pins the along-track position too.
 
     While dead-reckoning a line is no constraint where the filter is nearer, across, to
     another road beside it (:meth:`_nearer_road`): the cloud then has only the map to tell
@@ -323,6 +324,19 @@ class EkfRoadAid:
                            & (np.abs(off_j) < abs(off) - self.sigma_cross)
                            & (np.abs(off_j - off) >= 3.0 * self.sigma_cross)))
 
+    def _arc_placed(self, legs, R, P2):
+        """Does the filter know where on the arc from leg ``legs[0]`` to ``legs[1]`` (radius
+        ``R``) it is — its horizontal 2σ (largest axis) within the arc's length ``R·θ``? The
+        normal sweeps through the turn; placed no better than that, an offset beyond the
+        arc's own 2σ is as well explained by the car being elsewhere along the road (never-
+        seen campaign drive 5847359501566820251: dead-reckoning at σ 7 m along into an 8 m
+        arc, 4.6 m across it moved the filter 10 m, 18 m off at σ 4.5 m; the arcs such a
+        filter met on the other drives were right within 0.8 m, and they pin its along-track
+        error: refused, one drive went 12 → 89 m)."""
+        turn = abs(float(wrap(self.g.seg_heading[legs[1]] - self.g.seg_heading[legs[0]])))
+        sig_h = float(np.sqrt(max(np.linalg.eigvalsh(P2)[-1], 0.0)))
+        return 2.0 * sig_h <= R * turn
+
     def _heading_agrees(self, s, hdg, flt):
         """Does directed segment ``s`` run the way the INS heads — within ``line_agree`` or
         three of the filter's heading σ?"""
@@ -502,10 +516,14 @@ class EkfRoadAid:
         elif legs is not None:
             rr = np.asarray(self.radii[2:])          # the first 0.4 s is the turn's entry
             if len(rr) >= 3 and np.subtract(*np.percentile(rr, [75, 25])) < 0.3 * np.median(rr):
-                arc = self._arc(*legs, p_ins, float(np.median(rr)))
+                R = float(np.median(rr))
+                arc = self._arc(*legs, p_ins, R)
                 if arc is not None:
                     sig_a = float(np.sqrt(max(arc[0] @ P2 @ arc[0], 0.0)))
-                    if abs(arc[1]) < max(self.arc_agree_m, 2.0 * sig_a):
+                    agree = max(self.arc_agree_m, 2.0 * sig_a)
+                    if not self._arc_placed(legs, R, P2):
+                        agree = 2.0 * self.sigma_arc
+                    if abs(arc[1]) < agree:
                         out = {"normal_n": arc[0], "offset": arc[1], "kind": "arc"}
         if out is None:
             return meas
