@@ -124,8 +124,7 @@ def test_an_arc_the_filter_cannot_place_itself_on_takes_only_small_offsets(helsi
     R = 9.0
     span = R * abs(float(wrap(g.seg_heading[q] - g.seg_heading[s])))
     for frac, placed in ((0.45, True), (0.55, False)):
-        sig = frac * span                                 # the largest axis
-        assert aid._arc_placed((s, q), R, np.diag([sig**2, 1.0])) is placed
+        assert aid._arc_placed((s, q), R, frac * span) is placed   # σ of the largest axis
 
 
 def _filter_beside_a_straight(g, along, cross_m, P, heading_off=0.0, s=None, at=60.0):

@@ -324,18 +324,17 @@ class EkfRoadAid:
                            & (np.abs(off_j) < abs(off) - self.sigma_cross)
                            & (np.abs(off_j - off) >= 3.0 * self.sigma_cross)))
 
-    def _arc_placed(self, legs, R, P2):
+    def _arc_placed(self, legs, R, sigma_h):
         """Does the filter know where on the arc from leg ``legs[0]`` to ``legs[1]`` (radius
-        ``R``) it is — its horizontal 2σ (largest axis) within the arc's length ``R·θ``? The
-        normal sweeps through the turn; placed no better than that, an offset beyond the
-        arc's own 2σ is as well explained by the car being elsewhere along the road (never-
-        seen campaign drive 5847359501566820251: dead-reckoning at σ 7 m along into an 8 m
-        arc, 4.6 m across it moved the filter 10 m, 18 m off at σ 4.5 m; the arcs such a
-        filter met on the other drives were right within 0.8 m, and they pin its along-track
-        error: refused, one drive went 12 → 89 m)."""
+        ``R``) it is — its horizontal 2σ (``sigma_h``, the largest axis) within the arc's
+        length ``R·θ``? The normal sweeps through the turn; placed no better than that, an
+        offset beyond the arc's own 2σ is as well explained by the car being elsewhere along
+        the road (never-seen campaign drive 5847359501566820251: dead-reckoning at σ 7 m
+        along into an 8 m arc, 4.6 m across it moved the filter 10 m, 18 m off at σ 4.5 m; the
+        arcs such a filter met on the other drives were right within 0.8 m, and they pin its
+        along-track error: refused, one drive went 12 → 89 m)."""
         turn = abs(float(wrap(self.g.seg_heading[legs[1]] - self.g.seg_heading[legs[0]])))
-        sig_h = float(np.sqrt(max(np.linalg.eigvalsh(P2)[-1], 0.0)))
-        return 2.0 * sig_h <= R * turn
+        return 2.0 * sigma_h <= R * turn
 
     def _heading_agrees(self, s, hdg, flt):
         """Does directed segment ``s`` run the way the INS heads — within ``line_agree`` or
@@ -521,7 +520,7 @@ class EkfRoadAid:
                 if arc is not None:
                     sig_a = float(np.sqrt(max(arc[0] @ P2 @ arc[0], 0.0)))
                     agree = max(self.arc_agree_m, 2.0 * sig_a)
-                    if not self._arc_placed(legs, R, P2):
+                    if not self._arc_placed(legs, R, sigma_h):
                         agree = 2.0 * self.sigma_arc
                     if abs(arc[1]) < agree:
                         out = {"normal_n": arc[0], "offset": arc[1], "kind": "arc"}
