@@ -191,6 +191,25 @@ def test_a_road_line_the_ins_does_not_head_along_is_no_constraint(helsinki, off_
         assert abs(outs[0]["offset"] - 1.0) < 0.05
 
 
+@pytest.mark.parametrize("cloud_at, sigma_m, expected",
+                         [(10.0, 2.0, False), (10.0, 20.0, True), (55.0, 2.0, True)])
+def test_a_road_line_from_a_cloud_elsewhere_along_the_road_is_no_constraint(
+        helsinki, cloud_at, sigma_m, expected):
+    """The cross-track test of a line cannot see a cloud that is on the right road but in
+    the wrong place along it: a cloud 50 m behind a filter sure of itself to 2 m is refused
+    (simulated campaign drive 8234251124038289217 with the yaw-bias hypotheses on: a
+    collapsed cloud left 50–60 m behind at a junction gave the lines of the road the car had
+    left; the filter went 27 m off at σ 4.6 m). Within the filter's 3σ (σ 20 m) or the 10 m
+    floor it is a constraint."""
+    P = np.eye(15) * sigma_m**2
+    P[8, 8] = np.radians(0.5) ** 2
+    aid, flt, _, _ = _filter_beside_a_straight(helsinki, np.full(400, cloud_at), 1.0, P)
+    outs = aid.constraints(0.2, flt)
+    assert (len(outs) == 1) == expected, outs
+    if expected:
+        assert abs(outs[0]["offset"] - 1.0) < 0.05
+
+
 def _parallel_pair(g, lo=6.0, hi=12.0):
     """A straight segment over 80 m with one other road beside it, parallel within 20° and
     ``lo``–``hi`` m away across its middle: ``(segment, signed distance to its right)``."""

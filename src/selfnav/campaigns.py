@@ -49,7 +49,7 @@ ROADNAV_DEFAULTS = {
     "kinds": "white,gm,drift,drag",
     "startup_prob": 0.5,
     "odometer": 0,               # 1: simulate wheel speed and give it to the navigator
-    "yaw_bias_split_deg": 0.0,   # > 0: the navigator's yaw-bias hypotheses this wide, °/s
+    "yaw_bias_split_deg": -1.0,  # the yaw-bias hypotheses this wide, °/s; 0: off; < 0: default
     "odo_sf_sigma": 0.005,
     "odo_quantum_mps": 0.01,
     "method": "ekf",
@@ -119,17 +119,19 @@ def longest_off_route(sim, lat, lon, t, limit_m=5.0):
 
 
 def _navigator_options(params: dict) -> dict:
-    """Navigator options of a campaign's parameters: ``yaw_bias_split_deg`` > 0 turns on the
-    yaw-bias hypotheses (:mod:`selfnav.ins.headings`, off by default)."""
-    split = float(params.get("yaw_bias_split_deg", 0.0))
-    if split <= 0.0:
+    """Navigator options of a campaign's parameters: ``yaw_bias_split_deg`` ≥ 0 sets the
+    yaw-bias hypotheses' width (:mod:`selfnav.ins.headings`; 0: none), < 0 keeps the
+    navigator's default."""
+    split = float(params.get("yaw_bias_split_deg", -1.0))
+    if split < 0.0:
         return {}
     import dataclasses
 
     from selfnav.ins.config import navigator_config
 
     cfg = navigator_config()
-    init = dataclasses.replace(cfg.init, yaw_bias_split_sigma=float(np.radians(split)))
+    init = dataclasses.replace(cfg.init, yaw_bias_split_sigma=(float(np.radians(split))
+                                                               if split > 0.0 else None))
     return {"config": dataclasses.replace(cfg, init=init)}
 
 

@@ -8,6 +8,8 @@ measurements.
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from selfnav.errors import SelfnavError
@@ -140,7 +142,10 @@ class EkfRoadAid:
 
     While dead-reckoning a line is no constraint where the filter is nearer, across, to
     another road beside it (:meth:`_nearer_road`): the cloud then has only the map to tell
-    parallel roads apart.
+    parallel roads apart. No constraint either while the cloud's mean is further from the
+    filter, in any direction, than ``max(agree_m, 3σ)`` (σ of the filter along that direction
+    with the cloud's spread, :meth:`_cloud_agrees`): a cloud left behind at a junction holds
+    the line of a road the vehicle has passed.
 
     ``grade_sigma`` adds a level-road prior ``v_U = 0`` (σ ``grade_sigma·|v| + 0.1`` m/s, once
     per ``interval``): the map has no heights, and without it the filter's pitch error, hardly
@@ -323,6 +328,23 @@ class EkfRoadAid:
                               < np.sin(np.radians(20.0)))
                            & (np.abs(off_j) < abs(off) - self.sigma_cross)
                            & (np.abs(off_j - off) >= 3.0 * self.sigma_cross)))
+
+    def _cloud_agrees(self, est, p, P2):
+        """Is the cloud's mean ``est["xy"]`` within ``max(agree_m, 3σ)`` of the filter at
+        ``p`` — σ the filter's along the line between them (``P2``) with the cloud's spread?
+        The cross-track test of a line misses a cloud that is on the right road but in the
+        wrong place along it (simulated campaign drive 8234251124038289217 with the yaw-bias
+        hypotheses on, stop 46: a collapsed cloud left 50–60 m behind at a junction, the
+        filter and the truth past it at σ 6.5 m; the lines of the road the vehicle had left
+        took the filter 4 m off the new one, and that one, 7° from the filter's long axis,
+        moved it 10 m along: 27 m off at σ 4.6 m)."""
+        d = np.asarray(est["xy"], float) - p
+        dist = float(np.hypot(d[0], d[1]))
+        if dist <= self.agree_m:
+            return True
+        u = d / dist
+        s_u = math.hypot(float(np.sqrt(max(u @ P2 @ u, 0.0))), float(est["spread"]))
+        return dist <= 3.0 * s_u
 
     def _arc_placed(self, legs, R, sigma_h):
         """Does the filter know where on the arc from leg ``legs[0]`` to ``legs[1]`` (radius
@@ -527,9 +549,12 @@ class EkfRoadAid:
         if out is None:
             return meas
         # the cloud and the filter disagree by more than the filter's own uncertainty allows:
-        # one of them is on another road; constraining the filter then would make it two
+        # one of them is on another road, or elsewhere on this one; constraining the filter
+        # then would make it two
         n = out["normal_n"]
         if abs(out["offset"]) > max(self.agree_m, 3.0 * float(np.sqrt(max(n @ P2 @ n, 0.0)))):
+            return meas
+        if not self._cloud_agrees(est, p_ins, P2):
             return meas
         if self.dead_reckoning and out["kind"] in ("line", "leg") and self._nearer_road(p_ins, out):
             # the cloud follows the dead reckoning and has only the map to tell parallel roads
