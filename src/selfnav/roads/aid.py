@@ -329,22 +329,25 @@ class EkfRoadAid:
                            & (np.abs(off_j) < abs(off) - self.sigma_cross)
                            & (np.abs(off_j - off) >= 3.0 * self.sigma_cross)))
 
+    def _agrees(self, dist, u, P2, spread=0.0):
+        """The agreement test of the cloud and the filter: is ``dist`` (m, along unit vector
+        ``u``) within ``max(agree_m, 3σ)`` — σ the filter's along ``u`` (``P2``) with
+        ``spread``, the cloud's?"""
+        s_u = math.hypot(float(np.sqrt(max(u @ P2 @ u, 0.0))), spread)
+        return abs(dist) <= max(self.agree_m, 3.0 * s_u)
+
     def _cloud_agrees(self, est, p, P2):
-        """Is the cloud's mean ``est["xy"]`` within ``max(agree_m, 3σ)`` of the filter at
-        ``p`` — σ the filter's along the line between them (``P2``) with the cloud's spread?
-        The cross-track test of a line misses a cloud that is on the right road but in the
-        wrong place along it (simulated campaign drive 8234251124038289217 with the yaw-bias
-        hypotheses on, stop 46: a collapsed cloud left 50–60 m behind at a junction, the
-        filter and the truth past it at σ 6.5 m; the lines of the road the vehicle had left
-        took the filter 4 m off the new one, and that one, 7° from the filter's long axis,
-        moved it 10 m along: 27 m off at σ 4.6 m)."""
+        """Is the cloud's mean ``est["xy"]`` within :meth:`_agrees` of the filter at ``p``,
+        in the direction between them, with the cloud's spread? The cross-track test of a line
+        misses a cloud that is on the right road but in the wrong place along it (simulated
+        campaign drive 8234251124038289217 with the yaw-bias hypotheses on, stop 46: a
+        collapsed cloud left 50–60 m behind at a junction, the filter and the truth past it
+        at σ 6.5 m; the lines of the road the vehicle had left took the filter 4 m off the new
+        one, and that one, 7° from the filter's long axis, moved it 10 m along: 27 m off at
+        σ 4.6 m)."""
         d = np.asarray(est["xy"], float) - p
         dist = float(np.hypot(d[0], d[1]))
-        if dist <= self.agree_m:
-            return True
-        u = d / dist
-        s_u = math.hypot(float(np.sqrt(max(u @ P2 @ u, 0.0))), float(est["spread"]))
-        return dist <= 3.0 * s_u
+        return dist <= self.agree_m or self._agrees(dist, d / dist, P2, float(est["spread"]))
 
     def _arc_placed(self, legs, R, sigma_h):
         """Does the filter know where on the arc from leg ``legs[0]`` to ``legs[1]`` (radius
@@ -551,10 +554,8 @@ class EkfRoadAid:
         # the cloud and the filter disagree by more than the filter's own uncertainty allows:
         # one of them is on another road, or elsewhere on this one; constraining the filter
         # then would make it two
-        n = out["normal_n"]
-        if abs(out["offset"]) > max(self.agree_m, 3.0 * float(np.sqrt(max(n @ P2 @ n, 0.0)))):
-            return meas
-        if not self._cloud_agrees(est, p_ins, P2):
+        if not (self._agrees(out["offset"], out["normal_n"], P2)
+                and self._cloud_agrees(est, p_ins, P2)):
             return meas
         if self.dead_reckoning and out["kind"] in ("line", "leg") and self._nearer_road(p_ins, out):
             # the cloud follows the dead reckoning and has only the map to tell parallel roads
@@ -583,7 +584,7 @@ class EkfRoadAid:
         # divided road's other carriageway, a parallel street) is the chance the line is the
         # wrong one (simulated campaign drive 8234251124038289217: 80 % of the cloud on a
         # road 8 m from the truth, the constraint at σ 1 m held the filter there at σ 2.3 m)
-        off_c = (pos - p_ins) @ n + out["offset"]
+        off_c = (pos - p_ins) @ out["normal_n"] + out["offset"]
         out["sigma"] = float(np.hypot(self.sigma_cross, np.sqrt(w @ off_c**2)))   # w sums to 1
         if self.sigma_heading is None:
             del out["heading"]
