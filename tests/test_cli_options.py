@@ -42,7 +42,7 @@ def test_help_lists_choices_and_no_negative_negatives(capsys):
             opts = [ln for ln in text.splitlines() if ln.strip().startswith("--")]
             assert not [ln for ln in opts if "<str>" in ln], cmd   # free text has a metavar
     nav = _help(capsys, "navigate")
-    for needle in ("[ekf|seed]", "[auto|csv|psins|psins-csv|rtklibexplorer|kfgins|ulog]",
+    for needle in ("[ekf|seed]", "[auto|csv|psins|psins-csv|psins-mat|rtklibexplorer|kfgins|ulog]",
                    "[wgs84|pz90.11|pz90|sk42]", "[auto|navigation|tactical|industrial|consumer]",
                    "--nhc / --no-nhc", "--out-rate HZ", "A FILE"):
         assert needle in " ".join(nav.split()).replace("[ ", "["), needle

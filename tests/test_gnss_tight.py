@@ -290,9 +290,13 @@ def test_navigate_gnss_raw_bad_combinations_are_one_line(shared_data, tmp_path, 
     code, _, se = run_cli(["navigate", "--out", tmp_path / "o.csv"], capsys)
     assert code == 2 and "--imu" in se and "--gnss-raw" in se
     smart = shared_data / "smartloc_berlin_potsdamer_platz" / "Berlin_Potsdamer_Platz_Input.txt"
+    code, _, se = run_cli(["navigate", "--gnss-raw", smart, "--gnss", android,
+                           "--out", tmp_path / "o.csv"], capsys)
+    assert code == 2 and "without --gnss" in se
+    # with --imu it is the tightly coupled INS path: a file that is no IMU is named
     code, _, se = run_cli(["navigate", "--gnss-raw", smart, "--imu", android,
                            "--out", tmp_path / "o.csv"], capsys)
-    assert code == 2 and "without --imu" in se
+    assert code == 2 and se.count("\n") == 1 and android.name in se
     assert not (tmp_path / "o.csv").exists()
 
 

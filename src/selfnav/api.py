@@ -617,7 +617,7 @@ def write_sat_log(path, solution: Solution):
 
 __all__ += ["read_gnss_raw", "spp", "receiver_solution", "write_sat_log"]
 
-from selfnav.api_gnss import (navigate_raw, simulate_city_files,  # noqa: E402  (issue 23)
+from selfnav.api_gnss import (navigate_raw, navigate_raw_imu, simulate_city_files,  # noqa: E402  (issue 23)
                               write_tight_log)
 
-__all__ += ["navigate_raw", "write_tight_log", "simulate_city_files"]
+__all__ += ["navigate_raw", "navigate_raw_imu", "write_tight_log", "simulate_city_files"]

@@ -95,6 +95,49 @@ def navigate_raw(gnss_raw, *, fmt: str = "auto", smooth: bool = False,
     return Solution(traj, sig, cols, stats, "tight+smooth" if smooth else "tight", (r, prs))
 
 
+def navigate_raw_imu(gnss_raw, imu, *, grade: str = "auto", fmt: str = "auto",
+                     config=None, progress=None) -> Solution:
+    """Tightly coupled INS/GNSS (:func:`selfnav.ins.tight.run_tight_ins`): the strapdown INS
+    updated by each satellite's pseudorange and range rate, causal.
+
+    Parameters
+    ----------
+    gnss_raw : path or :class:`selfnav.io.gnss_raw.RawGnss` (observations with ephemerides:
+        RINEX with its navigation records, UBX, PSINS ``.mat``)
+    imu : path or :class:`selfnav.types.ImuData`, stamped in GNSS (GPS) time
+    grade : the IMU's grade; ``"auto"``: tactical (the start at rest gyrocompasses where the
+        grade's gyro bias allows, else it waits for motion)
+    config : :class:`selfnav.ins.tight.TightInsConfig`, optional (its ``grade`` is replaced)
+
+    Returns
+    -------
+    Solution
+        ``method "tight-ins"``, σ per row, columns ``sigma_h_m, n_sats, n_excluded, clock_m,
+        clock_drift_mps``; ``detail`` the :class:`selfnav.ins.tight.TightInsResult`.
+    """
+    from selfnav.io.raw_readers import read_gnss_raw
+    from selfnav.io.readers import read_imu
+    from selfnav.ins.tight import TightInsConfig, run_tight_ins
+
+    raw = read_gnss_raw(gnss_raw, fmt=fmt) if isinstance(gnss_raw, (str, Path)) else gnss_raw
+    data = read_imu(imu) if isinstance(imu, (str, Path)) else imu
+    g = "tactical" if str(grade).lower() == "auto" else grade
+    cfg = replace(config or TightInsConfig(), grade=g)
+    try:
+        r = run_tight_ins(data, raw, cfg, progress=progress)
+    except np.linalg.LinAlgError as e:
+        raise SelfnavError(f"{raw.source}: the tightly coupled filter failed numerically ({e})") \
+            from None
+    traj = Trajectory(r.t, r.lat, r.lon, r.h, r.velocity_n, r.C_nb,
+                      source=f"selfnav tight-ins {raw.source}")
+    sig_h = np.sqrt((r.sigma_enu[:, 0] ** 2 + r.sigma_enu[:, 1] ** 2) / 2.0)
+    cols = {"sigma_h_m": sig_h, "n_sats": r.n_used, "n_excluded": r.n_excluded,
+            "clock_m": r.clock_m, "clock_drift_mps": r.drift_mps}
+    stats = {**r.stats, "source": str(raw.source), "median_sigma_h_m":
+             float(np.median(sig_h)) if len(sig_h) else float("nan")}
+    return Solution(traj, r.sigma_enu, cols, stats, "tight-ins", r)
+
+
 def write_tight_log(path, solution: Solution):
     """One row per pseudorange of a :func:`navigate_raw` solution: ``t, system, sat, cn0_dbhz,
     elevation_deg, residual_m`` (at the output state), ``component`` (los, multipath,

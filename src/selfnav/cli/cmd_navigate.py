@@ -86,6 +86,37 @@ def _navigate_raw(path: Path, out: Path, *, smooth: bool, fix_log, out_datum: st
               f"(every satellite drifting since {e['branch_s']:.1f} s)")
 
 
+def _navigate_raw_imu(path: Path, imu: Path, out: Path, *, grade: str, fix_log, out_datum: str,
+                      as_json: bool) -> None:
+    """``navigate --gnss-raw FILE --imu FILE``: :func:`selfnav.api.navigate_raw_imu`."""
+    from selfnav import api
+    from selfnav.cli.progress import bar
+
+    if fix_log is not None:
+        raise SelfnavError("--fix-log is not written by the tightly coupled INS path yet (its "
+                           "per-epoch satellites are in the solution's n_sats / n_excluded)")
+    t0 = time.perf_counter()
+    with bar("navigating (tight, INS)", enabled=not as_json) as update:
+        sol = api.navigate_raw_imu(path, imu, grade=grade,
+                                   progress=lambda done, total: update(done / max(total, 1)))
+    elapsed = time.perf_counter() - t0
+    sol.to_csv(out, datum=out_datum, comments=[
+        f"selfnav navigate --gnss-raw {path.name} --imu {imu.name} (tightly coupled, causal)"])
+    s = sol.stats
+    span = float(sol.t[-1] - sol.t[0]) if len(sol) > 1 else 0.0
+    summary = {"method": sol.method, "epochs": len(sol), "duration_s": span,
+               "seconds": elapsed, **s, "out": str(out)}
+    if as_json:
+        emit_json(summary)
+        return
+    st = s["start"]
+    print(f"{out}: {len(sol)} epochs over {span:.1f} s, {elapsed:.1f} s, tightly coupled INS "
+          f"(grade {s['grade']})")
+    print(f"  start {st['method']}, heading {st['heading_deg']:.1f}° ± "
+          f"{st['sigma_heading_deg']:.1f}°; satellites excluded {s['excluded']} times, clock "
+          f"jumps {s['clock_jumps']}; median σ_h {s['median_sigma_h_m']:.2f} m")
+
+
 def register(app: typer.Typer) -> None:
     @app.command("navigate")
     def navigate_cmd(
@@ -94,9 +125,11 @@ def register(app: typer.Typer) -> None:
         imu: opt.OptionalImuFile = None,
         gnss: opt.OptionalGnssFile = None,
         gnss_raw: Annotated[Optional[Path], typer.Option(
-            "--gnss-raw", help="Raw pseudoranges with the car's speed and yaw rate in the same "
-                               "file (smartLoc format): tightly coupled, every satellite judged "
-                               "on its own; instead of --imu and --gnss.")] = None,
+            "--gnss-raw", help="Raw pseudoranges, tightly coupled, every satellite judged on "
+                               "its own: with --imu (stamped in GPS time; RINEX with navigation "
+                               "records, UBX, PSINS .mat) the INS; alone, the car's speed and "
+                               "yaw rate in the same file (smartLoc format). Instead of "
+                               "--gnss.")] = None,
         drift_guard: Annotated[bool, typer.Option(
             "--drift-guard/--no-drift-guard",
             help="--gnss-raw: hold the odometry's track when every satellite drifts together "
@@ -191,10 +224,13 @@ def register(app: typer.Typer) -> None:
         if fix_log is not None:
             check_output_file(fix_log)
         if gnss_raw is not None:
-            if imu is not None or gnss is not None or map_ is not None:
-                raise SelfnavError("--gnss-raw navigates from its own pseudoranges and odometry: "
-                                   "give it without --imu, --gnss and --map (tight coupling "
-                                   "with an IMU is not built yet)")
+            if gnss is not None or map_ is not None:
+                raise SelfnavError("--gnss-raw navigates from its own pseudoranges: give it "
+                                   "without --gnss and --map")
+            if imu is not None:
+                _navigate_raw_imu(gnss_raw, imu, out, grade=grade, fix_log=fix_log,
+                                  out_datum=out_datum, as_json=as_json)
+                return
             _navigate_raw(gnss_raw, out, smooth=smooth, fix_log=fix_log, out_datum=out_datum,
                           as_json=as_json, drift_guard=drift_guard)
             return

@@ -18,7 +18,8 @@ from typing import Annotated, Callable, Optional
 import typer
 import typer.core
 
-IMU_FORMATS = ("auto", "csv", "psins", "psins-csv", "rtklibexplorer", "kfgins", "ulog")
+IMU_FORMATS = ("auto", "csv", "psins", "psins-csv", "psins-mat", "rtklibexplorer", "kfgins",
+               "ulog")
 GNSS_FORMATS = ("auto", "csv", "pos", "nmea", "psins-avp", "ulog")
 #: :data:`selfnav.axes.PRESETS` (``tests/test_cli_options.py`` checks they are the same)
 AXES_PRESETS = ("rtklibexplorer-drive0708", "px4", "kfgins", "ros")

@@ -256,12 +256,45 @@ def ionosphere_delay(raw: RawGnss, t, lat, lon, az, el, freq):
     return klobuchar(t, lat, lon, az, el, a, b, freq), "klobuchar-default"
 
 
-def spp_raw(raw: RawGnss, cfg: RawSppConfig | None = None) -> RawSppResult:
-    """Positions, velocities and exclusions of every epoch of a raw record."""
+@dataclass
+class CorrectedObservations:
+    """The observations of a raw record ready for positioning (one row each, by epoch): the
+    selected signals, the satellites' states at transmit time, the pseudorange corrected for
+    the satellite clock, group delay, ionosphere and troposphere (``pr``), its a-priori
+    variance by the C/N0 model (``var``; ``smooth_factor`` times it for a smoothed code) and
+    the line of sight from a coarse all-satellite fix of the same epoch (``az``, ``el``).
+    Causal: each row uses its epoch and the past."""
+
+    obs: GnssObservations
+    sat: np.ndarray
+    sat_vel: np.ndarray
+    sat_drift: np.ndarray
+    pr: np.ndarray
+    var: np.ndarray
+    smooth_factor: np.ndarray
+    az: np.ndarray
+    el: np.ndarray
+    iono: np.ndarray
+    tropo: np.ndarray
+    iono_model: str
+
+    def range_rate(self, cfg: RawSppConfig) -> tuple[np.ndarray, np.ndarray]:
+        """``(ρ̇, var)`` of each row, m/s (NaN where the row has no Doppler)."""
+        return range_rate(self.obs, cfg)
+
+
+def range_rate(obs: GnssObservations, cfg: RawSppConfig) -> tuple[np.ndarray, np.ndarray]:
+    """``ρ̇ = −λ D`` (m/s; NaN without a Doppler) and its variance by the C/N0 model."""
+    rr = -obs.doppler * C_LIGHT / obs.frequency
+    var = cfg.doppler_sigma0**2 * 10.0 ** ((cfg.spp.cn0_ref - _cn0(obs)) / 10.0)
+    return rr, var
+
+
+def correct_observations(raw: RawGnss, cfg: RawSppConfig | None = None) -> CorrectedObservations:
+    """Signals selected, code smoothed (``cfg.smoothing_s``; 0: raw code), satellites and
+    corrections of every observation of a raw record with ephemerides (module docstring)."""
     cfg = cfg or RawSppConfig()
     obs = raw.obs
-    if obs.corrected:
-        return _spp_corrected(raw, cfg)
     if len(raw.eph) == 0:
         raise InputError(raw.source, "no ephemerides: the file carries none; give a RINEX "
                                      "navigation file (--nav)")
@@ -279,26 +312,39 @@ def spp_raw(raw: RawGnss, cfg: RawSppConfig | None = None) -> RawSppResult:
     # coarse all-satellite fix for the line-of-sight geometry
     coarse = solve_spp(obs.t, pr, None, sat, obs.system, None, _cn0(obs),
                        SppConfig(weighting="cn0", raim=False))
-    ep = np.searchsorted(coarse.t, obs.t)
+    # an epoch with too few satellites for its own fix takes the last one before it (the
+    # geometry and the atmosphere need kilometres, not metres: a tight filter uses such epochs)
+    last = np.maximum.accumulate(np.where(np.isfinite(coarse.lat), np.arange(len(coarse.t)), -1))
+    ep = last[np.searchsorted(coarse.t, obs.t)]
+    ep_ok = ep >= 0
+    ep = np.maximum(ep, 0)
     rx = coarse.ecef[ep]
-    lat, lon, h = coarse.lat[ep], coarse.lon[ep], coarse.h[ep]
+    lat, lon, h = (np.where(ep_ok, x[ep], np.nan) for x in (coarse.lat, coarse.lon, coarse.h))
     az, el = azimuth_elevation(rx, sagnac_rotate(sat, rx), lat, lon)
     iono, iono_model = np.zeros(len(obs)), "none"
     if cfg.ionosphere:
         iono, iono_model = ionosphere_delay(raw, obs.t, lat, lon, az, el, obs.frequency)
     tropo = saastamoinen(lat, h, el) if cfg.troposphere else np.zeros(len(obs))
-    good = np.isfinite(el) & (el >= np.radians(cfg.elevation_mask_deg))
+    m = np.isfinite(el) & (el >= np.radians(cfg.elevation_mask_deg))
     iono, tropo = np.nan_to_num(iono), np.nan_to_num(tropo)
-    m = good
-    obs, sat, sat_vel, sat_drift = obs.select(m), sat[m], sat_vel[m], sat_drift[m]
-    prc = (pr - iono - tropo)[m]
-    az, el, iono, tropo = az[m], el[m], iono[m], tropo[m]
-    var = observation_variance(np.full(len(obs), cfg.spp.sigma0**2), el, _cn0(obs), cfg.spp)
-    var = var * smooth_factor[m]
-    res = solve_spp(obs.t, prc, var, sat, obs.system, el, _cn0(obs),
+    obs = obs.select(m)
+    var = observation_variance(np.full(len(obs), cfg.spp.sigma0**2), el[m], _cn0(obs), cfg.spp)
+    return CorrectedObservations(obs, sat[m], sat_vel[m], sat_drift[m], (pr - iono - tropo)[m],
+                                 var, smooth_factor[m], az[m], el[m], iono[m], tropo[m],
+                                 iono_model)
+
+
+def spp_raw(raw: RawGnss, cfg: RawSppConfig | None = None) -> RawSppResult:
+    """Positions, velocities and exclusions of every epoch of a raw record."""
+    cfg = cfg or RawSppConfig()
+    if raw.obs.corrected:
+        return _spp_corrected(raw, cfg)
+    c = correct_observations(raw, cfg)
+    obs = c.obs
+    res = solve_spp(obs.t, c.pr, c.var * c.smooth_factor, c.sat, obs.system, c.el, _cn0(obs),
                     replace(cfg.spp, weighting="variance", variance_scale=1.0))
-    out = _finish(raw, cfg, obs, res, sat, sat_vel, sat_drift, az, el, iono, tropo)
-    out.stats["ionosphere"] = iono_model
+    out = _finish(raw, cfg, obs, res, c.sat, c.sat_vel, c.sat_drift, c.az, c.el, c.iono, c.tropo)
+    out.stats["ionosphere"] = c.iono_model
     return out
 
 
@@ -355,8 +401,7 @@ def _velocity(res, obs, sat, sat_vel, sat_drift, names, cfg):
     drift = np.full(E, np.nan)
     vpass = np.zeros(E, bool)
     excl = [[] for _ in range(E)]
-    rr = -obs.doppler * C_LIGHT / obs.frequency
-    var = cfg.doppler_sigma0**2 * 10.0 ** ((cfg.spp.cn0_ref - _cn0(obs)) / 10.0)
+    rr, var = range_rate(obs, cfg)
     ok = np.isfinite(rr) & res.obs_used & np.all(np.isfinite(sat_vel), axis=1)
     ep = res.obs_epoch
     scale = VarianceScale()

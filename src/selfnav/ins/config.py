@@ -148,6 +148,13 @@ class StateOptions:
     odometer : the odometer's scale-factor error (+1), with an odometer input
     odometer_scale_sigma : its initial σ (fraction: tyre radius, pressure, wear)
     odometer_scale_rw : its random walk, 1/√s
+    receiver_clock : the GNSS receiver's clock bias and drift (+2, m and m/s), for
+        pseudorange and Doppler updates (tight coupling, :mod:`selfnav.ins.tight`)
+    receiver_clock_sigma, receiver_drift_sigma : their initial σ, m and m/s (after a
+        least-squares start)
+    receiver_clock_rw, receiver_drift_rw : their random walks, m/√s and m/s/√s (fact: a
+        receiver's TCXO, Groves 2013 §9.4.2: phase and frequency noise densities of
+        0.01 m²/s and 0.04 m²/s³)
     """
 
     scale_factors: bool = False
@@ -175,6 +182,11 @@ class StateOptions:
     odometer: bool = False
     odometer_scale_sigma: float = 0.02
     odometer_scale_rw: float = 1e-5
+    receiver_clock: bool = False
+    receiver_clock_sigma: float = 30.0
+    receiver_drift_sigma: float = 1.0
+    receiver_clock_rw: float = 0.1
+    receiver_drift_rw: float = 0.2
 
 
 @dataclass

@@ -12,6 +12,7 @@ seed 004 fast loop); the filter estimates its errors
          [+ δε]           IMU time offset, s (1)
          [+ δλ_v]         lag of the GNSS velocity behind its position, s (1)
          [+ δk]           odometer scale factor (1)
+         [+ δb_r, δḃ_r]   GNSS receiver clock bias (m) and drift (m/s), tight coupling (2)
 
 with ``δ(·) = estimated − true`` and the attitude error ``C̃_b^n = (I − [ψ]) C_b^n``. Which
 optional blocks exist is the :class:`StateLayout` of the configuration. The sensor model
@@ -29,6 +30,7 @@ simplified to what a MEMS or tactical IMU needs)::
     δḃ = −δb/τ + w                 (τ = ∞ by default: a turn-on constant plus a random walk
                                     whose density matches the bias instability)
     δṡ = δṀ = δμ̇ = δl̇ = δε̇ = δλ̇_v = δk̇ = 0 (+ a small random walk)
+    δḃ_r = δḃ_r (the drift carries the bias; both random walks, Groves 2013 (9.149))
 
 An unmodelled 1 % misalignment turns a 90° corner into 0.9° of tilt (DESIGN §10: replays of
 captured drives dead-reckoned at 25–45σ); with the states the covariance grows with every turn
@@ -75,7 +77,7 @@ OFFDIAG = ((0, 1), (0, 2), (1, 0), (1, 2), (2, 0), (2, 1))
 
 #: optional error-state blocks: (name, size) in their order in the state vector
 BLOCKS = (("sg", 3), ("sa", 3), ("mg", 6), ("ma", 6), ("mu", 2), ("lever", 3), ("toff", 1),
-          ("tdrift", 1), ("vlag", 1), ("odo", 1))
+          ("tdrift", 1), ("vlag", 1), ("odo", 1), ("clk", 2))
 
 
 def _pack_layout():
@@ -108,6 +110,7 @@ class StateLayout:
     tdrift: slice | None = None
     vlag: slice | None = None
     odo: slice | None = None
+    clk: slice | None = None
 
     @classmethod
     def of(cls, cfg: FilterConfig) -> "StateLayout":
@@ -115,7 +118,7 @@ class StateLayout:
         on = {"sg": st.scale_factors, "sa": st.scale_factors, "mg": st.misalignment,
               "ma": st.misalignment, "mu": st.mount_states, "lever": st.lever_arm,
               "toff": st.time_offset, "tdrift": st.time_offset and st.clock_drift,
-              "vlag": st.velocity_lag, "odo": st.odometer}
+              "vlag": st.velocity_lag, "odo": st.odometer, "clk": st.receiver_clock}
         n = NX
         blocks = {}
         for name, size in BLOCKS:
@@ -454,6 +457,9 @@ class InsGnssFilter:
         self.time_offset_applied = float(time_offset_applied)
         self.velocity_lag = 0.0
         self.odo_scale = 0.0
+        #: GNSS receiver clock bias (m) and drift (m/s), with ``states.receiver_clock``
+        self.rx_clock = 0.0
+        self.rx_drift = 0.0
         self.q_scale = 1.0
         self.bias_scale = 1.0
         #: (gyro, accelerometer) process-noise factors from the vibration the IMU feels now
@@ -498,7 +504,7 @@ class InsGnssFilter:
         # the geometry and timing of the installation (mounting, lever arm, time offset,
         # velocity lag, odometer scale) are not IMU noise: λ does not scale them
         self._q_fixed = np.zeros(self.nx)
-        for sl in (lay.mu, lay.lever, lay.toff, lay.tdrift, lay.vlag, lay.odo):
+        for sl in (lay.mu, lay.lever, lay.toff, lay.tdrift, lay.vlag, lay.odo, lay.clk):
             if sl is not None:
                 self._q_fixed[sl] = q[sl]
         self._q_slow = q - self._q_white - self._q_fixed
@@ -522,6 +528,8 @@ class InsGnssFilter:
                        (lay.vlag, st.velocity_lag_rw)):
             if sl is not None:
                 q[sl] = rw**2
+        if lay.clk is not None:
+            q[lay.clk] = (st.receiver_clock_rw**2, st.receiver_drift_rw**2)
         return q
 
     def _sensor_inv(self):
@@ -681,6 +689,15 @@ class InsGnssFilter:
             i = j = -1
         _propagate_block(self.P, self._Phi_acc, Fcc, Fcp, q, h, nsub, self.track_transition,
                          i, j)
+        if lay.clk is not None:
+            # the receiver's drift carries its clock: δb_r ← δb_r + T δḃ_r (a shear, as the
+            # IMU clock's in the kernel)
+            i = lay.clk.start
+            self.rx_clock += self.rx_drift * T
+            self.P[i, :] += T * self.P[i + 1, :]
+            self.P[:, i] += T * self.P[:, i + 1]
+            if self.track_transition:
+                self._Phi_acc[i, :] += T * self._Phi_acc[i + 1, :]
 
     # ------------------------------------------------------------------ updates
     def _correct(self, dx):
@@ -701,6 +718,9 @@ class InsGnssFilter:
             self.velocity_lag -= float(dx[lay.vlag.start])
         if lay.odo is not None:
             self.odo_scale -= float(dx[lay.odo.start])
+        if lay.clk is not None:
+            self.rx_clock -= float(dx[lay.clk.start])
+            self.rx_drift -= float(dx[lay.clk.start + 1])
 
     def kalman(self, r, H, R):
         """Apply a measurement (residual ``h(x̃) − z``, Jacobian ``H``, noise ``R``) and correct
@@ -731,7 +751,13 @@ class InsGnssFilter:
                 "ma": imu.accel_mis_sigma, "mu": st.mount_sigma, "lever": st.lever_arm_sigma,
                 "toff": st.time_offset_sigma, "tdrift": st.clock_drift_sigma,
                 "vlag": st.velocity_lag_sigma,
-                "odo": st.odometer_scale_sigma}
+                "odo": st.odometer_scale_sigma,
+                "clk": np.array([st.receiver_clock_sigma, st.receiver_drift_sigma])}
+
+    def set_receiver_drift_rw(self, rw: float) -> None:
+        """The receiver clock's frequency random walk, m/s/√s, from now on (learnt from the
+        data: :class:`selfnav.ins.tight.ClockNoise`)."""
+        self._q_fixed[self.layout.clk.start + 1] = float(rw) ** 2
 
     def reprior(self, *names):
         """Return the named parameter blocks (``"lever"``, ``"vlag"``, ...; ``"bg"``, ``"ba"``,
@@ -849,7 +875,7 @@ def pack_state(flt) -> np.ndarray:
     return np.concatenate([[s.lat, s.lon, s.h], s.velocity_n, s.C_nb.reshape(9), flt.bg, flt.ba,
                            flt.sg, flt.sa, flt.mg, flt.ma, flt.mu, flt.lever_b,
                            [flt.time_offset], [flt.clock_drift], [flt.velocity_lag],
-                           [flt.odo_scale]])
+                           [flt.odo_scale], [flt.rx_clock, flt.rx_drift]])
 
 
 def unpack_states(t, states, Ps):

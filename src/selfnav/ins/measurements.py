@@ -28,6 +28,16 @@ rear-axle centre): ``v_v = C_vb (C_bn^T v^n + ω_b × l_nhc)`` with ``C_vb = exp
 
 **Wheel speed** (odometer): the forward speed at the NHC point scaled by ``1 + k``.
 
+**Pseudoranges and range rates** (tight coupling, :mod:`selfnav.ins.tight`): the antenna's
+position and velocity as the GNSS fixes above see them, into each satellite's range and range
+rate (:mod:`selfnav.gnss.models` (1)–(2)) with the receiver clock bias ``b_r`` and drift
+``ḃ_r``::
+
+    h(x) = |r^s − r_a| + b_r,   ∂h/∂δx = −u^T C_n^e ∂r_a/∂δx + ∂/∂δb_r
+    ḣ(x) = u·(v^s − v_a) + ḃ_r + …
+
+(``u`` the line of sight from the antenna to the satellite, ``C_n^e`` ENU to ECEF).
+
 **Roads** (:mod:`selfnav.roads.aid`): the distance across the road's centre line (and along it
 at a corner), the road heading, a level road (``v_U = 0``).
 """
@@ -41,7 +51,8 @@ import numpy as np
 
 from selfnav import attitude as att
 from selfnav.attitude import rotvec_to_dcm3, skew3
-from selfnav.earth import OMEGA_EARTH, enu_offset
+from selfnav.earth import OMEGA_EARTH, enu_offset, enu_rotation, geodetic_to_ecef
+from selfnav.gnss.models import doppler_model, pseudorange_model
 from selfnav.ins.ekf import IBG, IP, IV
 
 #: indices of the position / velocity error states (the first six)
@@ -427,6 +438,62 @@ class LevelRoad(Measurement):
                      np.array([[self.sigma**2]]))
 
 
+def _antenna_ecef(flt, t):
+    """The antenna at (true) time ``t`` in ECEF, ENU → ECEF rotation and the antenna's ENU
+    position model (:class:`PositionFix` at the INS's own point: ``r`` is the antenna's offset
+    from it, ``H`` its Jacobian)."""
+    ins = flt.ins
+    at = PositionFix(t, ins.lat, ins.lon, ins.h, 1.0, 1.0).model(flt)
+    C_ne = enu_rotation(ins.lat, ins.lon).T
+    return geodetic_to_ecef(ins.lat, ins.lon, ins.h) + C_ne @ at.r, C_ne, at
+
+
+@dataclass
+class Pseudoranges(Measurement):
+    """Pseudoranges of one epoch at true time ``t``, m, corrected for the satellite clock and
+    group delay and the atmosphere; ``sat_ecef`` (M, 3) the satellites at transmit time,
+    ``var`` (M,) m²."""
+
+    t: float
+    pr: np.ndarray
+    sat_ecef: np.ndarray
+    var: np.ndarray
+    kind = "pseudorange"
+
+    def model(self, flt) -> Model:
+        r_a, C_ne, at = _antenna_ecef(flt, self.t)
+        rho, H4 = pseudorange_model(r_a, flt.rx_clock, np.asarray(self.sat_ecef, float))
+        H = (H4[:, :3] @ C_ne) @ at.H
+        H[:, flt.layout.clk.start] = 1.0
+        return Model(self.kind, rho - np.asarray(self.pr, float), H,
+                     np.diag(np.asarray(self.var, float)))
+
+
+@dataclass
+class RangeRates(Measurement):
+    """Range rates ``−λ D`` of one epoch at true time ``t``, m/s; the satellites' positions,
+    velocities and clock drifts (m/s) at transmit time; ``var`` (M,) (m/s)²."""
+
+    t: float
+    rate: np.ndarray
+    sat_ecef: np.ndarray
+    sat_vel: np.ndarray
+    sat_drift: np.ndarray
+    var: np.ndarray
+    kind = "range rate"
+
+    def model(self, flt) -> Model:
+        r_a, C_ne, _ = _antenna_ecef(flt, self.t)
+        vel = VelocityFix(self.t, np.zeros(3), 1.0, 1.0).model(flt)
+        rate, H7 = doppler_model(r_a, C_ne @ vel.r, flt.rx_drift, np.asarray(self.sat_ecef, float),
+                                 np.asarray(self.sat_vel, float),
+                                 np.asarray(self.sat_drift, float))
+        H = (H7[:, 3:6] @ C_ne) @ vel.H
+        H[:, flt.layout.clk.start + 1] = 1.0
+        return Model(self.kind, rate - np.asarray(self.rate, float), H,
+                     np.diag(np.asarray(self.var, float)))
+
+
 @dataclass
 class AlongTrackWiden:
     """Not a measurement: process noise along the track, (m/s)²/s × ``dt`` (the road aid's
@@ -442,4 +509,4 @@ class AlongTrackWiden:
 
 __all__ = ["Model", "Measurement", "PositionFix", "VelocityFix", "NonHolonomic",
            "ZeroVelocity", "ZeroRate", "WheelSpeed", "ForwardSpeed", "Heading", "RoadLine", "LevelRoad", "RunVelocity",
-           "vehicle_velocity", "_POS"]
+           "Pseudoranges", "RangeRates", "vehicle_velocity", "_POS"]

@@ -2,8 +2,10 @@
 (``insgpseo_tc.mat``: ``obss`` [tow, prn, C/A pseudorange m, …, Doppler m/s], ``ephs`` one row
 per PRN in RINEX order: prn, toc (s of week), af0, af1, af2, IODE, Crs, Δn, M0, Cuc, e, Cus,
 √A, toe, Cic, Ω0, Cis, i0, Crc, ω, Ω̇, IDOT, L2 codes, week, L2P, accuracy, health, TGD, IODC,
-…). The IMU in the same file is read by :mod:`selfnav.io.psins_mat`. The file has no
-ionosphere parameters (Klobuchar falls back to a default set, with a warning).
+…). The IMU in the same file (``imu``: 200 Hz increments dθ [rad], dv [m/s], t [s] from
+``t0``, the GPS time of week of IMU time 0) is read by :func:`read_psins_tc_imu`, stamped in
+GPS time as the observations are. The file has no ionosphere parameters (Klobuchar falls back
+to a default set, with a warning).
 """
 from __future__ import annotations
 
@@ -13,23 +15,59 @@ import numpy as np
 
 from selfnav.errors import InputError
 from selfnav.io.gnss_raw import GPS, GPS_WEEK_S, Ephemerides, GnssObservations, RawGnss
+from selfnav.io.imu import check_imu_units
+from selfnav.types import ImuData
 
 _EPH_COLS = ("prn", "toc", "af0", "af1", "af2", "iode", "crs", "delta_n", "m0", "cuc", "e",
              "cus", "sqrt_a", "toe", "cic", "omega0", "cis", "i0", "crc", "omega", "omega_dot",
              "idot", "codes", "week", "l2p", "ura", "health", "tgd")
 
 
-def read_psins_gnss(path) -> RawGnss:
-    """``obss`` and ``ephs`` of a PSINS ``.mat`` (GPS L1 C/A, GPS time)."""
+def _loadmat(path):
     import scipy.io as sio
 
-    path = Path(path)
     try:
-        m = sio.loadmat(path)
+        return sio.loadmat(path)
     except FileNotFoundError:
         raise InputError(path, "file not found") from None
     except Exception as e:
         raise InputError(path, f"not a readable MATLAB file ({type(e).__name__})") from None
+
+
+def read_psins_tc_imu(path) -> ImuData:
+    """The ``imu`` increments of a PSINS tightly coupled ``.mat`` (RFU) as rates, stamped in
+    GPS seconds (``week · 604800 + t0 + t``, the week of the file's ephemerides) when the file
+    has ``t0`` and ``ephs``, else in the file's own seconds."""
+    path = Path(path)
+    m = _loadmat(path)
+    if "imu" not in m:
+        raise InputError(path, "has no 'imu' variable (not the PSINS tightly coupled layout)")
+    a = np.asarray(m["imu"], float)
+    if a.ndim != 2 or a.shape[1] < 7 or len(a) < 2:
+        raise InputError(path, f"imu {a.shape}: expected rows of dθx dθy dθz dvx dvy dvz t")
+    t = a[:, 6]
+    if not np.all(np.diff(t) > 0):
+        raise InputError(path, f"imu column 7 (time) is not increasing at row "
+                               f"{int(np.argmin(np.diff(t) > 0)) + 2}")
+    dt = np.diff(t, prepend=t[0] - float(np.median(np.diff(t))))
+    meta = {"format": "psins-tc-mat", "time": "file"}
+    if "t0" in m and "ephs" in m:
+        eph = np.asarray(m["ephs"], float)
+        filled = eph[:, 12] > 0 if eph.ndim == 2 and eph.shape[1] > 23 else np.zeros(0, bool)
+        if np.any(filled):
+            week = int(np.median(eph[filled, 23]))
+            t = t + week * GPS_WEEK_S + float(np.ravel(m["t0"])[0])
+            meta["time"] = "gps"
+    imu = ImuData(t, a[:, 0:3] / dt[:, None], a[:, 3:6] / dt[:, None], source=str(path),
+                  meta=meta)
+    check_imu_units(imu, path)
+    return imu
+
+
+def read_psins_gnss(path) -> RawGnss:
+    """``obss`` and ``ephs`` of a PSINS ``.mat`` (GPS L1 C/A, GPS time)."""
+    path = Path(path)
+    m = _loadmat(path)
     if "obss" not in m or "ephs" not in m:
         raise InputError(path, "has no 'obss' and 'ephs' variables (not the PSINS tightly "
                                "coupled GNSS layout)")

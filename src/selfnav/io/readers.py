@@ -18,6 +18,7 @@ from selfnav.io.imu import read_imu_csv
 from selfnav.io.kfgins import read_kfgins_imu
 from selfnav.io.nmea_rmc import read_nmea_rmc
 from selfnav.io.psins import read_psins_imu
+from selfnav.io.psins_gnss import read_psins_tc_imu
 from selfnav.io.psins_mat import (AVP_COLUMNS, INCREMENT_COLUMNS, header_of, read_avp_csv,
                                   read_increments_csv)
 from selfnav.io import rtklibexplorer
@@ -25,17 +26,20 @@ from selfnav.io.rtklibexplorer import IMU_T_OFF, read_rtklibexplorer_imu
 from selfnav.io.ulog import ULOG_SUFFIXES, read_ulog_baro, read_ulog_gnss, read_ulog_imu
 from selfnav.types import BaroData, GnssData, ImuData
 
-IMU_FORMATS = ("auto", "csv", "psins", "psins-csv", "rtklibexplorer", "kfgins", "ulog")
+IMU_FORMATS = ("auto", "csv", "psins", "psins-csv", "psins-mat", "rtklibexplorer", "kfgins",
+               "ulog")
 GNSS_FORMATS = ("auto", "csv", "pos", "nmea", "psins-avp", "ulog")
 
 #: The axes each IMU format's columns are in, by the format's own documentation (the reader
 #: converts them to RFU). ``rtklibexplorer`` documents none: its default is the preset of
 #: :data:`selfnav.io.rtklibexplorer.DEFAULT_AXES` (the reader returns the sensor's axes).
-FORMAT_AXES = {"csv": "RFU", "psins": "RFU", "psins-csv": "RFU", "kfgins": "FRD", "ulog": "FRD"}
+FORMAT_AXES = {"csv": "RFU", "psins": "RFU", "psins-csv": "RFU", "psins-mat": "RFU",
+               "kfgins": "FRD", "ulog": "FRD"}
 
 
 def imu_format_of(path) -> str:
-    """The IMU format ``auto`` picks: PSINS for ``.imu``/``.imu.gz``, PX4 ULog for ``.ulg``,
+    """The IMU format ``auto`` picks: PSINS for ``.imu``/``.imu.gz`` (and its tightly coupled
+    demo's ``.mat``), PX4 ULog for ``.ulg``,
     rtklibexplorer when a
     ``.tag`` file stands beside the CSV, PSINS increments for a CSV headed ``dtheta_x_rad,...``,
     the native CSV otherwise."""
@@ -45,6 +49,8 @@ def imu_format_of(path) -> str:
         return "psins"
     if name.endswith(ULOG_SUFFIXES):
         return "ulog"
+    if name.endswith(".mat"):
+        return "psins-mat"
     if p.with_name(p.name + ".tag").exists():
         return "rtklibexplorer"
     if header_of(p)[:1] == (INCREMENT_COLUMNS[0],):
@@ -59,7 +65,7 @@ def read_imu(path, fmt: str = "auto", *, time_offset_s: float = 0.0, axes=None,
     Parameters
     ----------
     path : str or Path
-    fmt : {"auto", "csv", "psins", "psins-csv", "rtklibexplorer", "kfgins", "ulog"}
+    fmt : {"auto", "csv", "psins", "psins-csv", "psins-mat", "rtklibexplorer", "kfgins", "ulog"}
         ``auto``: :func:`imu_format_of`.
     time_offset_s : float
         Added to the time stamps, s. The rtklibexplorer format applies upstream's own
@@ -91,6 +97,8 @@ def read_imu(path, fmt: str = "auto", *, time_offset_s: float = 0.0, axes=None,
         imu = read_kfgins_imu(p)
     elif fmt == "psins-csv":
         imu = read_increments_csv(p)
+    elif fmt == "psins-mat":
+        imu = read_psins_tc_imu(p)
     elif fmt == "ulog":
         imu = read_ulog_imu(p)
     elif fmt == "rtklibexplorer":

@@ -73,3 +73,19 @@ def inject_faults(obs: GnssObservations, faults) -> GnssObservations:
         if f.doppler:
             out.doppler[m] -= rate * obs.frequency[m] / C_LIGHT
     return out
+
+
+def only_satellites(obs: GnssObservations, t_from: float, t_to: float, n: int):
+    """A partial sky: within ``[t_from, t_to)`` (GPS s) only the ``n`` satellites of the most
+    observed system that are seen most often there are kept (a street that hides the rest);
+    ``n = 0`` keeps none."""
+    from selfnav.io.gnss_raw import sat_names
+
+    win = (obs.t >= t_from) & (obs.t < t_to)
+    systems, counts = np.unique(obs.system, return_counts=True)
+    main = systems[np.argmax(counts)]
+    names = sat_names(obs.system, obs.prn)
+    cand, cnt = np.unique(names[win & (obs.system == main)], return_counts=True)
+    keep = cand[np.argsort(-cnt, kind="stable")[:n]]
+    return obs.select(~win | np.isin(names, keep))
+

@@ -216,3 +216,29 @@ def simulate_gnss(t, rx_ecef, rx_vel_ecef=None, cfg: SatSimConfig | None = None)
     truth = {"t": tg, "t_tag": tg + clock / C_LIGHT, "ecef": rx, "vel_ecef": rv,
              "clock_m": clock, "drift_mps": drift, "nlos": nlos_names, "faults": list(cfg.faults)}
     return RawGnss(obs, eph, None, "SIMULATED satellites (selfnav.sim.satellites)"), truth
+
+
+def simulate_raw_drive(kind: str = "car", *, seed: int = 0, grade: str = "industrial",
+                       duration: float = 300.0, cfg: SatSimConfig | None = None):
+    """A built-in scenario (:func:`selfnav.sim.scenarios.simulate`) with raw GNSS along its
+    truth, for tight coupling (SIMULATED): ``(truth, raw, imu)``, the IMU (with the grade's
+    errors) stamped in GPS time as the observations are (``cfg.t0`` + the scenario's time),
+    epochs at ``cfg.rate_hz`` on whole seconds of the scenario."""
+    from selfnav.earth import enu_rotation, geodetic_to_ecef
+    from selfnav.sim.scenarios import simulate
+    from selfnav.types import ImuData
+
+    cfg = cfg or SatSimConfig(seed=seed)
+    sim = simulate(kind, seed=seed, grade=grade, duration=duration)
+    tr = sim.truth
+    te = np.arange(np.ceil(tr.t[0]), tr.t[-1], 1.0 / cfg.rate_hz)
+    lat, lon, h = (np.interp(te, tr.t, x) for x in (tr.lat, tr.lon, tr.h))
+    v = np.column_stack([np.interp(te, tr.t, tr.velocity_n[:, i]) for i in range(3)])
+    rx = np.array([geodetic_to_ecef(a, b, c) for a, b, c in zip(lat, lon, h)])
+    rv = np.einsum("kji,kj->ki", enu_rotation(lat, lon), v)        # ENU → ECEF
+    raw, _ = simulate_gnss(te, rx, rv, cfg)
+    imu = ImuData(sim.imu.t + cfg.t0, sim.imu.omega_ib_b, sim.imu.f_ib_b,
+                  source=f"simulated {kind} (seed {seed}, {grade})",
+                  meta={**sim.imu.meta, "time": "gps"})
+    return tr, raw, imu
+
