@@ -123,13 +123,16 @@ def test_cli_navigates_the_psins_record_tightly(psins, tmp_path):
     from selfnav.solution import read_solution
 
     path, _, _ = psins
-    out = tmp_path / "tc.csv"
+    out, log = tmp_path / "tc.csv", tmp_path / "sats.csv"
     res = CliRunner().invoke(app, ["navigate", "--gnss-raw", str(path), "--imu", str(path),
-                                   "--out", str(out)])
+                                   "--out", str(out), "--fix-log", str(log)])
     assert res.exit_code == 0, res.output
     assert "tightly coupled INS" in res.output
     sol = read_solution(out)
     assert len(sol) > 80
+    rows = log.read_text().splitlines()
+    assert rows[0] == "t,sat,z,status,clock_jump_m"
+    assert len(rows) - 1 == int(sol.columns["n_sats"].sum() + sol.columns["n_excluded"].sum())
 
 
 # ---------------------------------------------------------------- SIMULATED drives
@@ -182,6 +185,22 @@ def test_three_satellites_for_a_minute_beat_the_ins_alone(drive11):
         assert np.sqrt(np.mean((eh[w] / sh[w]) ** 2)) < 2.0
     assert worst[0] > 5.0
     assert worst[3] <= 0.5 * worst[0]
+
+
+def test_a_second_constellation_with_its_own_clock_offset_is_used():
+    """SIMULATED: Galileo 25 m late against GPS in the receiver: the offset is a state (found
+    within 1 m), the clean error as without it, and both constellations are used."""
+    from selfnav.io.gnss_raw import GALILEO
+
+    cfg = SatSimConfig(seed=11, system_offset_m={GALILEO: 25.0})
+    tr, raw, imu = simulate_raw_drive("car", seed=11, grade="industrial", cfg=cfg)
+    r = _run(imu, raw, grade="industrial")
+    assert r.stats["systems"] == "GE"
+    assert r.stats["inter_system_m"]["E"] == pytest.approx(25.0, abs=1.0)
+    assert np.median(r.n_used) > 12           # GPS and Galileo satellites together
+    tt, eh, sh = horizontal_error(r, tr, cfg.t0)
+    assert np.sqrt(np.mean(eh[tt > 30] ** 2)) < 1.0
+    assert 0.5 < np.sqrt(np.mean((eh / sh) ** 2)) < 1.6
 
 
 def test_a_receiver_clock_jump_is_taken_by_the_clock(drive11):

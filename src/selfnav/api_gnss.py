@@ -26,8 +26,8 @@ def read_raw_with_odometry(path, *, fmt: str = "auto"):
     if kind != "smartloc":
         raise InputError(path, f"this {kind} record has no odometry: navigate --gnss-raw needs the "
                                "car's speed and yaw rate in the same file (the smartLoc "
-                               "format's odom3 lines); tight coupling with an IMU is not built "
-                               "yet — use `selfnav spp` and navigate --gnss with its fixes")
+                               "format's odom3 lines) — or give the IMU: --imu FILE (stamped "
+                               "in GPS time) for the tightly coupled INS")
     prs, odo = read_smartloc_input(path)
     if len(odo.t) < 2:
         raise InputError(path, "has fewer than 2 odom3 lines: no speed and yaw rate to "
@@ -141,10 +141,22 @@ def navigate_raw_imu(gnss_raw, imu, *, grade: str = "auto", fmt: str = "auto",
 def write_tight_log(path, solution: Solution):
     """One row per pseudorange of a :func:`navigate_raw` solution: ``t, system, sat, cn0_dbhz,
     elevation_deg, residual_m`` (at the output state), ``component`` (los, multipath,
-    reflected; ``-`` where the epoch had no output) — written atomically."""
+    reflected; ``-`` where the epoch had no output) — written atomically. Of a
+    :func:`navigate_raw_imu` solution: ``t, sat, z`` (the innovation over its σ),
+    ``status`` (used / excluded), ``clock_jump_m``."""
     from selfnav.io.csvio import write_csv
     from selfnav.io.smartloc import SYSTEM_NAMES
 
+    if solution.method == "tight-ins":
+        rows = [(d.t, name, z, "used" if name in d.used else "excluded", d.clock_jump_m)
+                for d in solution.detail.decisions for name, z in d.z.items()]
+        cols = list(zip(*rows)) if rows else [[], [], [], [], []]
+        return write_csv(path, {"t": np.asarray(cols[0], float),
+                                "sat": np.asarray(cols[1], dtype=object),
+                                "z": np.asarray(cols[2], float),
+                                "status": np.asarray(cols[3], dtype=object),
+                                "clock_jump_m": np.asarray(cols[4], float)},
+                         fmt={"t": "%.3f", "z": "%.2f", "clock_jump_m": "%.3f"})
     r, prs = solution.detail
     comp = np.array([COMPONENT_NAMES[c] if 0 <= c < len(COMPONENT_NAMES) else
                      (f"delayed{c}" if c > 0 else "-") for c in r.obs_component.tolist()],

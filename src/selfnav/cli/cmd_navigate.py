@@ -92,9 +92,6 @@ def _navigate_raw_imu(path: Path, imu: Path, out: Path, *, grade: str, fix_log, 
     from selfnav import api
     from selfnav.cli.progress import bar
 
-    if fix_log is not None:
-        raise SelfnavError("--fix-log is not written by the tightly coupled INS path yet (its "
-                           "per-epoch satellites are in the solution's n_sats / n_excluded)")
     t0 = time.perf_counter()
     with bar("navigating (tight, INS)", enabled=not as_json) as update:
         sol = api.navigate_raw_imu(path, imu, grade=grade,
@@ -102,6 +99,8 @@ def _navigate_raw_imu(path: Path, imu: Path, out: Path, *, grade: str, fix_log, 
     elapsed = time.perf_counter() - t0
     sol.to_csv(out, datum=out_datum, comments=[
         f"selfnav navigate --gnss-raw {path.name} --imu {imu.name} (tightly coupled, causal)"])
+    if fix_log is not None:
+        api.write_tight_log(fix_log, sol)
     s = sol.stats
     span = float(sol.t[-1] - sol.t[0]) if len(sol) > 1 else 0.0
     summary = {"method": sol.method, "epochs": len(sol), "duration_s": span,

@@ -290,9 +290,14 @@ def range_rate(obs: GnssObservations, cfg: RawSppConfig) -> tuple[np.ndarray, np
     return rr, var
 
 
-def correct_observations(raw: RawGnss, cfg: RawSppConfig | None = None) -> CorrectedObservations:
+def correct_observations(raw: RawGnss, cfg: RawSppConfig | None = None, *,
+                         carry_geometry: bool = False) -> CorrectedObservations:
     """Signals selected, code smoothed (``cfg.smoothing_s``; 0: raw code), satellites and
-    corrections of every observation of a raw record with ephemerides (module docstring)."""
+    corrections of every observation of a raw record with ephemerides (module docstring).
+
+    ``carry_geometry``: an epoch with too few satellites for its own fix takes the last fix
+    before it for its lines of sight and atmosphere (kilometres are enough there; a tight
+    filter uses such epochs); otherwise its observations are dropped (no elevation)."""
     cfg = cfg or RawSppConfig()
     obs = raw.obs
     if len(raw.eph) == 0:
@@ -312,10 +317,11 @@ def correct_observations(raw: RawGnss, cfg: RawSppConfig | None = None) -> Corre
     # coarse all-satellite fix for the line-of-sight geometry
     coarse = solve_spp(obs.t, pr, None, sat, obs.system, None, _cn0(obs),
                        SppConfig(weighting="cn0", raim=False))
-    # an epoch with too few satellites for its own fix takes the last one before it (the
-    # geometry and the atmosphere need kilometres, not metres: a tight filter uses such epochs)
-    last = np.maximum.accumulate(np.where(np.isfinite(coarse.lat), np.arange(len(coarse.t)), -1))
-    ep = last[np.searchsorted(coarse.t, obs.t)]
+    ep = np.searchsorted(coarse.t, obs.t)
+    if carry_geometry:
+        last = np.maximum.accumulate(np.where(np.isfinite(coarse.lat), np.arange(len(coarse.t)),
+                                              -1))
+        ep = last[ep]
     ep_ok = ep >= 0
     ep = np.maximum(ep, 0)
     rx = coarse.ecef[ep]

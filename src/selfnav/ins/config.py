@@ -155,6 +155,10 @@ class StateOptions:
     receiver_clock_rw, receiver_drift_rw : their random walks, m/√s and m/s/√s (fact: a
         receiver's TCXO, Groves 2013 §9.4.2: phase and frequency noise densities of
         0.01 m²/s and 0.04 m²/s³)
+    inter_system : the receiver's clock offsets of up to four further constellations against
+        the reference one (+4, m; with ``receiver_clock``)
+    inter_system_sigma : their initial σ, m (after a least-squares start)
+    inter_system_rw : their random walk, m/√s (fact: hardware delays drift with temperature)
     """
 
     scale_factors: bool = False
@@ -187,6 +191,9 @@ class StateOptions:
     receiver_drift_sigma: float = 1.0
     receiver_clock_rw: float = 0.1
     receiver_drift_rw: float = 0.2
+    inter_system: bool = False
+    inter_system_sigma: float = 30.0
+    inter_system_rw: float = 0.01
 
 
 @dataclass

@@ -13,6 +13,7 @@ seed 004 fast loop); the filter estimates its errors
          [+ δλ_v]         lag of the GNSS velocity behind its position, s (1)
          [+ δk]           odometer scale factor (1)
          [+ δb_r, δḃ_r]   GNSS receiver clock bias (m) and drift (m/s), tight coupling (2)
+         [+ δb_s]         the receiver's clock offsets of further constellations, m (4)
 
 with ``δ(·) = estimated − true`` and the attitude error ``C̃_b^n = (I − [ψ]) C_b^n``. Which
 optional blocks exist is the :class:`StateLayout` of the configuration. The sensor model
@@ -77,7 +78,8 @@ OFFDIAG = ((0, 1), (0, 2), (1, 0), (1, 2), (2, 0), (2, 1))
 
 #: optional error-state blocks: (name, size) in their order in the state vector
 BLOCKS = (("sg", 3), ("sa", 3), ("mg", 6), ("ma", 6), ("mu", 2), ("lever", 3), ("toff", 1),
-          ("tdrift", 1), ("vlag", 1), ("odo", 1), ("clk", 2))
+          ("tdrift", 1), ("vlag", 1), ("odo", 1), ("clk", 2),
+          ("isb", 4))
 
 
 def _pack_layout():
@@ -111,6 +113,7 @@ class StateLayout:
     vlag: slice | None = None
     odo: slice | None = None
     clk: slice | None = None
+    isb: slice | None = None
 
     @classmethod
     def of(cls, cfg: FilterConfig) -> "StateLayout":
@@ -118,7 +121,8 @@ class StateLayout:
         on = {"sg": st.scale_factors, "sa": st.scale_factors, "mg": st.misalignment,
               "ma": st.misalignment, "mu": st.mount_states, "lever": st.lever_arm,
               "toff": st.time_offset, "tdrift": st.time_offset and st.clock_drift,
-              "vlag": st.velocity_lag, "odo": st.odometer, "clk": st.receiver_clock}
+              "vlag": st.velocity_lag, "odo": st.odometer, "clk": st.receiver_clock,
+              "isb": st.receiver_clock and st.inter_system}
         n = NX
         blocks = {}
         for name, size in BLOCKS:
@@ -460,6 +464,8 @@ class InsGnssFilter:
         #: GNSS receiver clock bias (m) and drift (m/s), with ``states.receiver_clock``
         self.rx_clock = 0.0
         self.rx_drift = 0.0
+        #: clock offsets of further constellations against the reference one, m
+        self.rx_isb = np.zeros(4)
         self.q_scale = 1.0
         self.bias_scale = 1.0
         #: (gyro, accelerometer) process-noise factors from the vibration the IMU feels now
@@ -504,7 +510,7 @@ class InsGnssFilter:
         # the geometry and timing of the installation (mounting, lever arm, time offset,
         # velocity lag, odometer scale) are not IMU noise: λ does not scale them
         self._q_fixed = np.zeros(self.nx)
-        for sl in (lay.mu, lay.lever, lay.toff, lay.tdrift, lay.vlag, lay.odo, lay.clk):
+        for sl in (lay.mu, lay.lever, lay.toff, lay.tdrift, lay.vlag, lay.odo, lay.clk, lay.isb):
             if sl is not None:
                 self._q_fixed[sl] = q[sl]
         self._q_slow = q - self._q_white - self._q_fixed
@@ -530,6 +536,8 @@ class InsGnssFilter:
                 q[sl] = rw**2
         if lay.clk is not None:
             q[lay.clk] = (st.receiver_clock_rw**2, st.receiver_drift_rw**2)
+        if lay.isb is not None:
+            q[lay.isb] = st.inter_system_rw**2
         return q
 
     def _sensor_inv(self):
@@ -721,6 +729,8 @@ class InsGnssFilter:
         if lay.clk is not None:
             self.rx_clock -= float(dx[lay.clk.start])
             self.rx_drift -= float(dx[lay.clk.start + 1])
+        if lay.isb is not None:
+            self.rx_isb -= dx[lay.isb]
 
     def kalman(self, r, H, R):
         """Apply a measurement (residual ``h(x̃) − z``, Jacobian ``H``, noise ``R``) and correct
@@ -752,7 +762,8 @@ class InsGnssFilter:
                 "toff": st.time_offset_sigma, "tdrift": st.clock_drift_sigma,
                 "vlag": st.velocity_lag_sigma,
                 "odo": st.odometer_scale_sigma,
-                "clk": np.array([st.receiver_clock_sigma, st.receiver_drift_sigma])}
+                "clk": np.array([st.receiver_clock_sigma, st.receiver_drift_sigma]),
+                "isb": st.inter_system_sigma}
 
     def set_receiver_drift_rw(self, rw: float) -> None:
         """The receiver clock's frequency random walk, m/s/√s, from now on (learnt from the
@@ -796,7 +807,7 @@ class InsGnssFilter:
         out = _copy.copy(self)
         out.ins = _copy.deepcopy(self.ins)
         for name in ("P", "bg", "ba", "sg", "sa", "mg", "ma", "mu", "lever_b", "_f_n", "_w_b",
-                     "_f_b", "_Tg_inv", "_Ta_inv"):
+                     "_f_b", "_Tg_inv", "_Ta_inv", "rx_isb"):
             setattr(out, name, np.array(getattr(self, name), dtype=float, copy=True))
         out._Fcc = np.zeros_like(self._Fcc)
         out._Fcp = np.zeros_like(self._Fcp)
@@ -875,7 +886,7 @@ def pack_state(flt) -> np.ndarray:
     return np.concatenate([[s.lat, s.lon, s.h], s.velocity_n, s.C_nb.reshape(9), flt.bg, flt.ba,
                            flt.sg, flt.sa, flt.mg, flt.ma, flt.mu, flt.lever_b,
                            [flt.time_offset], [flt.clock_drift], [flt.velocity_lag],
-                           [flt.odo_scale], [flt.rx_clock, flt.rx_drift]])
+                           [flt.odo_scale], [flt.rx_clock, flt.rx_drift], flt.rx_isb])
 
 
 def unpack_states(t, states, Ps):

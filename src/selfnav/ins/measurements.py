@@ -452,19 +452,29 @@ def _antenna_ecef(flt, t):
 class Pseudoranges(Measurement):
     """Pseudoranges of one epoch at true time ``t``, m, corrected for the satellite clock and
     group delay and the atmosphere; ``sat_ecef`` (M, 3) the satellites at transmit time,
-    ``var`` (M,) m²."""
+    ``var`` (M,) m²; ``slot`` (M,) which inter-system clock offset each carries (-1: the
+    reference constellation's clock alone)."""
 
     t: float
     pr: np.ndarray
     sat_ecef: np.ndarray
     var: np.ndarray
+    slot: np.ndarray | None = None
     kind = "pseudorange"
 
     def model(self, flt) -> Model:
         r_a, C_ne, at = _antenna_ecef(flt, self.t)
-        rho, H4 = pseudorange_model(r_a, flt.rx_clock, np.asarray(self.sat_ecef, float))
+        clock = np.full(len(self.pr), flt.rx_clock)
+        slot = None if self.slot is None else np.asarray(self.slot)
+        if slot is not None and np.any(slot >= 0):
+            on = slot >= 0
+            clock[on] += flt.rx_isb[slot[on]]
+        rho, H4 = pseudorange_model(r_a, clock, np.asarray(self.sat_ecef, float))
         H = (H4[:, :3] @ C_ne) @ at.H
         H[:, flt.layout.clk.start] = 1.0
+        if slot is not None and np.any(slot >= 0):
+            rows = np.flatnonzero(slot >= 0)
+            H[rows, flt.layout.isb.start + slot[rows]] = 1.0
         return Model(self.kind, rho - np.asarray(self.pr, float), H,
                      np.diag(np.asarray(self.var, float)))
 

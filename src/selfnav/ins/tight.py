@@ -45,7 +45,7 @@ from selfnav.errors import SelfnavError
 from selfnav.gnss.fde import VarianceScale
 from selfnav.gnss.raw import (C_LIGHT, CorrectedObservations, RawSppConfig, correct_observations,
                               spp_raw)
-from selfnav.io.gnss_raw import RawGnss, sat_names
+from selfnav.io.gnss_raw import BEIDOU, GALILEO, GLONASS, GPS, QZSS, RawGnss, sat_names
 from selfnav.ins.align import align_in_motion, coarse_align
 from selfnav.ins.config import FilterConfig
 from selfnav.ins.ekf import IR, IV, InsGnssFilter
@@ -53,6 +53,7 @@ from selfnav.ins.measurements import Pseudoranges, RangeRates
 from selfnav.types import ImuData
 
 DEG = np.pi / 180.0
+SYSTEM_LETTERS = {GPS: "G", GLONASS: "R", GALILEO: "E", BEIDOU: "C", QZSS: "J"}
 
 
 @dataclass
@@ -79,6 +80,8 @@ class TightInsConfig:
     learn_clock : learn the receiver clock's frequency random walk from the past epochs'
         Doppler solutions (:class:`ClockNoise`), within ``drift_rw_bounds`` (m/s/√s); until
         then, and without Doppler, the configuration's
+    multi_system : use every constellation (up to five), their clock offsets against the
+        reference one (GPS where present) as states; else the most observed one alone
     filter : overrides of :class:`selfnav.ins.config.FilterConfig` fields by name
     """
 
@@ -94,6 +97,7 @@ class TightInsConfig:
     pos_sigma_floor: float = 5.0
     reopen_s: float = 10.0
     learn_clock: bool = True
+    multi_system: bool = True
     drift_rw_bounds: tuple = (0.002, 1.0)
     filter: dict = field(default_factory=dict)
 
@@ -140,6 +144,8 @@ class TightIns:
         itself out)."""
         flt = self.flt
         cols = [0, 1, 2, flt.layout.clk.start]
+        if flt.layout.isb is not None:
+            cols += [flt.layout.isb.start + int(k) for k in np.unique(self._slot[self._slot >= 0])]
         try:
             dx, C, T, dof = _snapshot(m, cols)
         except np.linalg.LinAlgError:
@@ -155,12 +161,16 @@ class TightIns:
         return True
 
     def add_epoch(self, t, names, pr, sat, var, rate=None, sat_vel=None, sat_drift_mps=None,
-                  rate_var=None) -> EpochDecision:
-        """One epoch's corrected pseudoranges (and range rates) at GNSS time ``t``."""
+                  rate_var=None, slot=None) -> EpochDecision:
+        """One epoch's corrected pseudoranges (and range rates) at GNSS time ``t``; ``slot``
+        the inter-system clock offset of each row (-1 or None: the reference constellation)."""
         flt, cfg = self.flt, self.cfg
         names = np.asarray(names)
         s2 = self.scale.value() if len(self.scale.buf) >= self.scale.min_count else 1.0
-        m = Pseudoranges(t, pr, sat, var * s2).model(flt)
+        if slot is None or flt.layout.isb is None:
+            slot = np.full(len(pr), -1)
+        self._slot = slot = np.asarray(slot)
+        m = Pseudoranges(t, pr, sat, var * s2, slot).model(flt)
         S = np.einsum("ij,jk,ik->i", m.H, flt.P, m.H) + np.diag(m.R)
         z = m.r / np.sqrt(S)
         ok = z**2 <= self._gate
@@ -176,7 +186,7 @@ class TightIns:
                 flt.P[:, i] = 0.0
                 flt.P[i, i] = (abs(med) / 3.0) ** 2 + flt.cfg.states.receiver_clock_sigma**2
                 jump = -med
-                m = Pseudoranges(t, pr, sat, var * s2).model(flt)
+                m = Pseudoranges(t, pr, sat, var * s2, slot).model(flt)
                 S = np.einsum("ij,jk,ik->i", m.H, flt.P, m.H) + np.diag(m.R)
                 z = m.r / np.sqrt(S)
                 ok = z**2 <= self._gate
@@ -184,14 +194,14 @@ class TightIns:
         if len(z) >= 5 and ok.sum() < len(z) / 2:
             reopened = self._reopen(m, S)
             if reopened:
-                m = Pseudoranges(t, pr, sat, var * s2).model(flt)
+                m = Pseudoranges(t, pr, sat, var * s2, slot).model(flt)
                 S = np.einsum("ij,jk,ik->i", m.H, flt.P, m.H) + np.diag(m.R)
                 z = m.r / np.sqrt(S)
                 ok = z**2 <= self._gate
         used = np.flatnonzero(ok)
         if len(used):
             flt.update(m.rows(used))
-            post = Pseudoranges(t, pr[used], sat[used], var[used]).model(flt)
+            post = Pseudoranges(t, pr[used], sat[used], var[used], slot[used]).model(flt)
             self.scale.add(post.r / np.sqrt(var[used]))
         dec = EpochDecision(float(t), names[used].tolist(), names[~ok].tolist(),
                             dict(zip(names.tolist(), np.round(z, 2).tolist())), jump,
@@ -313,7 +323,7 @@ def _interval(t):
     return float(np.median(np.diff(t))) if len(t) > 1 else 1.0
 
 
-def start_tight(imu: ImuData, spp, cfg: FilterConfig, tcfg: TightInsConfig):
+def start_tight(imu: ImuData, spp, cfg: FilterConfig, tcfg: TightInsConfig, systems=None):
     """The first epoch the filter can start at and its filter (module docstring); returns
     ``(epoch index, InsGnssFilter, start dict)``."""
     res = spp.spp
@@ -322,7 +332,12 @@ def start_tight(imu: ImuData, spp, cfg: FilterConfig, tcfg: TightInsConfig):
     vel_ok = np.isfinite(speed)
     fix_ok = res.valid & res.passed & (res.n_used >= 5)
     inside = (res.t >= imu.t[0]) & (res.t <= imu.t[-1])
-    sys_col = 0
+    systems = list(res.systems) if systems is None else list(systems)
+    cols = [int(np.flatnonzero(res.systems == x)[0]) if np.any(res.systems == x) else -1
+            for x in systems]
+    ref_ok = np.isfinite(res.clock[:, cols[0]]) if cols[0] >= 0 else np.zeros(E, bool)
+    fix_ok = fix_ok & ref_ok
+    sys_col = cols
     for k in range(E):
         if not (fix_ok[k] and inside[k] and vel_ok[k]):
             continue
@@ -369,7 +384,10 @@ def _filter(cfg, tcfg, res, spp, k, C_nb, v, att_sigma, vel_sigma, sys_col):
     flt = InsGnssFilter(c, float(res.t[k]), float(res.lat[k]), float(res.lon[k]),
                         float(res.h[k]), v, C_nb)
     flt.P[2, 2] = (2.0 * sig_h) ** 2
-    flt.rx_clock = float(res.clock[k, sys_col])
+    flt.rx_clock = float(res.clock[k, sys_col[0]])
+    for i, c in enumerate(sys_col[1:]):
+        if c >= 0 and np.isfinite(res.clock[k, c]):
+            flt.rx_isb[i] = float(res.clock[k, c] - res.clock[k, sys_col[0]])
     d = spp.clock_drift[k]
     flt.rx_drift = float(d) if np.isfinite(d) else 0.0
     return flt
@@ -381,17 +399,25 @@ def run_tight_ins(imu: ImuData, raw: RawGnss, cfg: TightInsConfig | None = None,
     tcfg = cfg or TightInsConfig()
     fcfg = FilterConfig.for_grade(tcfg.grade, receiver_clock=True, velocity_lag=False,
                                   time_offset=False, **tcfg.filter)
-    corr: CorrectedObservations = correct_observations(raw, tcfg.gnss)
+    corr: CorrectedObservations = correct_observations(raw, tcfg.gnss, carry_geometry=True)
     obs = corr.obs
-    # one system: the one with the most observations (inter-system clock offsets are not
-    # states yet)
+    # the reference constellation: GPS where there is GPS, else the most observed; up to four
+    # more with their clock offsets as states (``multi_system``)
     systems, counts = np.unique(obs.system, return_counts=True)
-    system = int(systems[np.argmax(counts)])
-    spp = spp_raw(raw, replace(tcfg.gnss, systems=(system,)))
+    order_sys = [int(x) for x in systems[np.argsort(-counts, kind="stable")]]
+    ref = GPS if GPS in order_sys else order_sys[0]
+    others = [x for x in order_sys if x != ref][:4] if tcfg.multi_system else []
+    used_sys = [ref] + others
+    if others:
+        fcfg = fcfg.updated(inter_system=True)
+    spp = spp_raw(raw, replace(tcfg.gnss, systems=tuple(used_sys)))
     _imu_on_gnss_time(imu, spp.spp.t)
-    k0, flt, start = start_tight(imu, spp, fcfg, tcfg)
+    k0, flt, start = start_tight(imu, spp, fcfg, tcfg, used_sys)
     nav = TightIns(flt, tcfg)
-    mine = obs.system == system
+    mine = np.isin(obs.system, used_sys)
+    slot_all = np.full(len(obs), -1)
+    for i, x in enumerate(others):
+        slot_all[obs.system == x] = i
     names_all = sat_names(obs.system, obs.prn)
     rate_all, rate_var_all = corr.range_rate(tcfg.gnss)
     # rows at every epoch and, through gaps of the record, on the epochs' grid
@@ -426,7 +452,8 @@ def run_tight_ins(imu: ImuData, raw: RawGnss, cfg: TightInsConfig | None = None,
         else:
             dec = nav.add_epoch(te, names_all[rows], corr.pr[rows], corr.sat[rows], corr.var[rows],
                                 rate_all[rows], corr.sat_vel[rows],
-                                C_LIGHT * corr.sat_drift[rows], rate_var_all[rows])
+                                C_LIGHT * corr.sat_drift[rows], rate_var_all[rows],
+                                slot_all[rows])
         decisions.append(dec)
         ins = flt.ins
         out["t"].append(te)
@@ -446,7 +473,10 @@ def run_tight_ins(imu: ImuData, raw: RawGnss, cfg: TightInsConfig | None = None,
         progress(len(t_ep), len(t_ep))
     a = {k: np.asarray(v) for k, v in out.items()}
     q = clock.value()
-    stats = {"start": start, "epochs": len(t_ep), "system": system,
+    stats = {"start": start, "epochs": len(t_ep), "system": ref,
+             "systems": "".join(SYSTEM_LETTERS.get(x, "?") for x in used_sys),
+             "inter_system_m": {SYSTEM_LETTERS.get(x, "?"): float(flt.rx_isb[i])
+                                for i, x in enumerate(others)},
              "clock_drift_rw": None if q is None else float(np.clip(q, *tcfg.drift_rw_bounds)),
              "excluded": int(a["nx"].sum()) if len(t_ep) else 0,
              "clock_jumps": sum(1 for d in decisions if d.clock_jump_m != 0.0),

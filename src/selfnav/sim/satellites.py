@@ -72,6 +72,8 @@ class SatSimConfig:
     canyon : StreetCanyon or None (open sky)
     iono_error : the true ionosphere is ``(1 + iono_error)`` × the broadcast model's
     seed : random seed
+    system_offset_m : {system code: m}, the receiver's clock offset of a constellation against
+        GPS (hardware delays: metres to tens of metres between GPS and Galileo or BeiDou)
     """
 
     t0: float = 2304 * GPS_WEEK_S + 3 * 86400 + 36000.0
@@ -87,6 +89,7 @@ class SatSimConfig:
     iono_error: float = 0.0
     seed: int = 0
     faults: list = field(default_factory=list)
+    system_offset_m: dict = field(default_factory=dict)
 
 
 def walker_ephemerides(t_ref: float, systems=(GPS, GALILEO), seed: int = 0) -> Ephemerides:
@@ -172,6 +175,7 @@ def simulate_gnss(t, rx_ecef, rx_vel_ecef=None, cfg: SatSimConfig | None = None)
     cols = {k: [] for k in ("t", "sys", "prn", "pr", "dop", "cn0")}
     nlos_names = set()
     idx = np.arange(ns)
+    offset = np.array([cfg.system_offset_m.get(int(x), 0.0) for x in eph.system])
     for e in range(E):
         rho, rot, clk, dclk = _geometry(eph, idx, tg[e], rx[e])
         # the range rate is the derivative of this very range (as a real Doppler is)
@@ -195,7 +199,8 @@ def simulate_gnss(t, rx_ecef, rx_vel_ecef=None, cfg: SatSimConfig | None = None)
         iono = (1 + cfg.iono_error) * klobuchar(tg[e], lat[e], lon[e], az, el, ION_ALPHA,
                                                 ION_BETA, F_L1)
         tropo = saastamoinen(lat[e], h[e], el)
-        pr = rho + clock[e] - C_LIGHT * clk + iono + tropo + bias + rng.normal(0, 1, ns) * sig
+        pr = (rho + clock[e] + offset - C_LIGHT * clk + iono + tropo + bias
+              + rng.normal(0, 1, ns) * sig)
         rr = rate_geo + drift[e] - C_LIGHT * dclk + rng.normal(0, 1, ns) * sig_d
         v = np.flatnonzero(vis)
         # the receiver's time tag runs with its clock
