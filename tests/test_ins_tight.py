@@ -116,6 +116,26 @@ def test_psins_record_is_causal(psins):
 
 
 @pytest.mark.filterwarnings("ignore::selfnav.errors.SelfnavWarning")
+def test_a_car_constraint_the_imu_refuses_is_not_forced(psins):
+    """Real record: its IMU's y axis is 90° off the car's motion. With ``platform="car"`` the
+    non-holonomic constraint is refused by its χ² test (it had taken the rows 11 m off) and
+    the rows stay as without it; with the mounting given (``--imu-mount 0,0,90``) it is taken."""
+    path, imu, raw = psins
+    r = _run(imu, raw, platform="car")
+    assert r.stats["nhc_refused"] > 500
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        s = spp_raw(raw, RawSppConfig(smoothing_s=0.0)).spp
+        mounted = read_imu(path, axes="RFU", mount="0,0,90")
+    k = np.searchsorted(s.t, r.t)
+    d = np.array([enu_offset(s.lat[j], s.lon[j], s.h[j], r.lat[i], r.lon[i], r.h[i])
+                  for i, j in enumerate(k)])
+    assert np.sqrt(np.mean(d[:, 0] ** 2 + d[:, 1] ** 2)) < 0.5
+    r2 = _run(mounted, raw, platform="car")
+    assert r2.stats["nhc_refused"] < 10
+
+
+@pytest.mark.filterwarnings("ignore::selfnav.errors.SelfnavWarning")
 def test_cli_navigates_the_psins_record_tightly(psins, tmp_path):
     from typer.testing import CliRunner
 
@@ -201,6 +221,23 @@ def test_a_second_constellation_with_its_own_clock_offset_is_used():
     tt, eh, sh = horizontal_error(r, tr, cfg.t0)
     assert np.sqrt(np.mean(eh[tt > 30] ** 2)) < 1.0
     assert 0.5 < np.sqrt(np.mean((eh / sh) ** 2)) < 1.6
+
+
+def test_a_cars_constraints_hold_three_satellites_closer(drive11):
+    """SIMULATED: with ``platform="car"`` (non-holonomic, level road) the 60 s with three
+    satellites stay within half the error of the unconstrained filter with none."""
+    tr, raw, imu, t0 = drive11
+    a, b = 150.0, 210.0
+    worst = {}
+    for n, platform in ((3, "car"), (0, "auto")):
+        r = _run(imu, partial_sky(raw, t0, a, b, n), grade="industrial", platform=platform)
+        tt, eh, sh = horizontal_error(r, tr, t0)
+        w = (tt >= a) & (tt < b)
+        worst[n] = eh[w].max()
+        if n == 3:
+            assert r.stats["nhc_refused"] < 0.05 * 3000
+            assert np.sqrt(np.mean((eh[w] / sh[w]) ** 2)) < 1.6
+    assert worst[3] <= 0.5 * worst[0]
 
 
 def test_a_receiver_clock_jump_is_taken_by_the_clock(drive11):

@@ -95,8 +95,8 @@ def navigate_raw(gnss_raw, *, fmt: str = "auto", smooth: bool = False,
     return Solution(traj, sig, cols, stats, "tight+smooth" if smooth else "tight", (r, prs))
 
 
-def navigate_raw_imu(gnss_raw, imu, *, grade: str = "auto", fmt: str = "auto",
-                     config=None, progress=None) -> Solution:
+def navigate_raw_imu(gnss_raw, imu, *, grade: str = "auto", platform: str = "auto",
+                     fmt: str = "auto", config=None, progress=None) -> Solution:
     """Tightly coupled INS/GNSS (:func:`selfnav.ins.tight.run_tight_ins`): the strapdown INS
     updated by each satellite's pseudorange and range rate, causal.
 
@@ -107,6 +107,8 @@ def navigate_raw_imu(gnss_raw, imu, *, grade: str = "auto", fmt: str = "auto",
     imu : path or :class:`selfnav.types.ImuData`, stamped in GNSS (GPS) time
     grade : the IMU's grade; ``"auto"``: tactical (the start at rest gyrocompasses where the
         grade's gyro bias allows, else it waits for motion)
+    platform : ``"car"``: a car's motion constraints (non-holonomic, level road); ``"auto"``
+        and the others: none (this path does not yet tell a car from the data)
     config : :class:`selfnav.ins.tight.TightInsConfig`, optional (its ``grade`` is replaced)
 
     Returns
@@ -122,7 +124,10 @@ def navigate_raw_imu(gnss_raw, imu, *, grade: str = "auto", fmt: str = "auto",
     raw = read_gnss_raw(gnss_raw, fmt=fmt) if isinstance(gnss_raw, (str, Path)) else gnss_raw
     data = read_imu(imu) if isinstance(imu, (str, Path)) else imu
     g = "tactical" if str(grade).lower() == "auto" else grade
-    cfg = replace(config or TightInsConfig(), grade=g)
+    from selfnav.ins.config import platform_settings
+
+    cfg = replace(config or TightInsConfig(), grade=g,
+                  platform=platform_settings(platform)["platform"])
     try:
         r = run_tight_ins(data, raw, cfg, progress=progress)
     except np.linalg.LinAlgError as e:

@@ -86,15 +86,15 @@ def _navigate_raw(path: Path, out: Path, *, smooth: bool, fix_log, out_datum: st
               f"(every satellite drifting since {e['branch_s']:.1f} s)")
 
 
-def _navigate_raw_imu(path: Path, imu: Path, out: Path, *, grade: str, fix_log, out_datum: str,
-                      as_json: bool) -> None:
+def _navigate_raw_imu(path: Path, imu: Path, out: Path, *, grade: str, platform: str, fix_log,
+                      out_datum: str, as_json: bool) -> None:
     """``navigate --gnss-raw FILE --imu FILE``: :func:`selfnav.api.navigate_raw_imu`."""
     from selfnav import api
     from selfnav.cli.progress import bar
 
     t0 = time.perf_counter()
     with bar("navigating (tight, INS)", enabled=not as_json) as update:
-        sol = api.navigate_raw_imu(path, imu, grade=grade,
+        sol = api.navigate_raw_imu(path, imu, grade=grade, platform=platform,
                                    progress=lambda done, total: update(done / max(total, 1)))
     elapsed = time.perf_counter() - t0
     sol.to_csv(out, datum=out_datum, comments=[
@@ -113,7 +113,9 @@ def _navigate_raw_imu(path: Path, imu: Path, out: Path, *, grade: str, fix_log, 
           f"(grade {s['grade']})")
     print(f"  start {st['method']}, heading {st['heading_deg']:.1f}° ± "
           f"{st['sigma_heading_deg']:.1f}°; satellites excluded {s['excluded']} times, clock "
-          f"jumps {s['clock_jumps']}; median σ_h {s['median_sigma_h_m']:.2f} m")
+          f"jumps {s['clock_jumps']}; median σ_h {s['median_sigma_h_m']:.2f} m; constellations "
+          f"{s['systems']}; motion constraints: {s['motion_constraints']}"
+          f"{'' if platform != 'auto' else ' (--platform car for a car)'}")
 
 
 def register(app: typer.Typer) -> None:
@@ -227,8 +229,8 @@ def register(app: typer.Typer) -> None:
                 raise SelfnavError("--gnss-raw navigates from its own pseudoranges: give it "
                                    "without --gnss and --map")
             if imu is not None:
-                _navigate_raw_imu(gnss_raw, imu, out, grade=grade, fix_log=fix_log,
-                                  out_datum=out_datum, as_json=as_json)
+                _navigate_raw_imu(gnss_raw, imu, out, grade=grade, platform=platform,
+                                  fix_log=fix_log, out_datum=out_datum, as_json=as_json)
                 return
             _navigate_raw(gnss_raw, out, smooth=smooth, fix_log=fix_log, out_datum=out_datum,
                           as_json=as_json, drift_guard=drift_guard)

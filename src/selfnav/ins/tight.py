@@ -47,9 +47,9 @@ from selfnav.gnss.raw import (C_LIGHT, CorrectedObservations, RawSppConfig, corr
                               spp_raw)
 from selfnav.io.gnss_raw import BEIDOU, GALILEO, GLONASS, GPS, QZSS, RawGnss, sat_names
 from selfnav.ins.align import align_in_motion, coarse_align
-from selfnav.ins.config import FilterConfig
+from selfnav.ins.config import PLATFORMS, FilterConfig
 from selfnav.ins.ekf import IR, IV, InsGnssFilter
-from selfnav.ins.measurements import Pseudoranges, RangeRates
+from selfnav.ins.measurements import LevelRoad, NonHolonomic, Pseudoranges, RangeRates
 from selfnav.types import ImuData
 
 DEG = np.pi / 180.0
@@ -80,6 +80,9 @@ class TightInsConfig:
     learn_clock : learn the receiver clock's frequency random walk from the past epochs'
         Doppler solutions (:class:`ClockNoise`), within ``drift_rw_bounds`` (m/s/√s); until
         then, and without Doppler, the configuration's
+    platform : ``"car"``: the non-holonomic constraint (every ``constraint_s`` while faster than
+        ``constraint_speed`` m/s) and a level-road prior (:data:`selfnav.ins.config.PLATFORMS`'s
+        car); anything else: no motion constraint (a walker, a boat or a drone slides sideways)
     multi_system : use every constellation (up to five), their clock offsets against the
         reference one (GPS where present) as states; else the most observed one alone
     filter : overrides of :class:`selfnav.ins.config.FilterConfig` fields by name
@@ -97,6 +100,9 @@ class TightInsConfig:
     pos_sigma_floor: float = 5.0
     reopen_s: float = 10.0
     learn_clock: bool = True
+    platform: str = "auto"
+    constraint_s: float = 0.1
+    constraint_speed: float = 1.0
     multi_system: bool = True
     drift_rw_bounds: tuple = (0.002, 1.0)
     filter: dict = field(default_factory=dict)
@@ -126,15 +132,49 @@ class TightIns:
         self.scale = VarianceScale()
         self._gate = float(chi2.ppf(1.0 - cfg.alpha, 1))
         self._t_last = flt.ins.t
+        self._t_grade = -np.inf
+        self._gate2 = float(chi2.ppf(1.0 - cfg.alpha, 2))
+        self.nhc_refused = 0
 
     def add_imu(self, t, omega_b, f_b):
-        """A block of IMU samples (stamps in GNSS time, rates and specific forces)."""
+        """A block of IMU samples (stamps in GNSS time, rates and specific forces); with a
+        car's constraints (``platform="car"``), in blocks of ``constraint_s`` each followed by
+        the non-holonomic constraint while moving, and a level-road prior each second."""
         t = np.atleast_1d(np.asarray(t, float))
         if len(t) == 0:
             return
+        omega_b, f_b = np.asarray(omega_b), np.asarray(f_b)
+        if self.cfg.platform != "car":
+            self._predict(t, omega_b, f_b)
+            return
+        edges = np.arange(self._t_last + self.cfg.constraint_s, t[-1], self.cfg.constraint_s)
+        for block in np.split(np.arange(len(t)), np.searchsorted(t, edges, side="right")):
+            if len(block) == 0:
+                continue
+            self._predict(t[block], omega_b[block], f_b[block])
+            self._constrain()
+
+    def _predict(self, t, omega_b, f_b):
         dt = np.diff(np.concatenate([[self._t_last], t]))
-        self.flt.predict(t, np.asarray(omega_b) * dt[:, None], np.asarray(f_b) * dt[:, None], dt)
+        self.flt.predict(t, omega_b * dt[:, None], f_b * dt[:, None], dt)
         self._t_last = float(t[-1])
+
+    def _constrain(self):
+        """A car on a road: no sideways or vertical slip at the rear axle while it moves
+        (docs/ekf.md), and the road's grade each second (:class:`LevelRoad`)."""
+        flt, veh = self.flt, self.flt.cfg.vehicle
+        speed = float(np.hypot(*flt.ins.velocity_n[:2]))
+        if speed < self.cfg.constraint_speed:
+            return
+        m = NonHolonomic(veh.nhc_sigma, veh.nhc_sigma_up or veh.nhc_sigma).model(flt)
+        # a constraint the state refuses (a slip, or an IMU not along the car) is not forced
+        if flt.nis(m) <= self._gate2:
+            flt.update(m)
+        else:
+            self.nhc_refused += 1
+        if veh.grade_sigma is not None and self._t_last - self._t_grade >= 1.0 - 1e-9:
+            self._t_grade = self._t_last
+            flt.update(LevelRoad.at_speed(veh.grade_sigma, speed, veh.grade_corr_s).model(flt))
 
     def _reopen(self, m, S) -> bool:
         """Most satellites refuse the prediction: if they agree among themselves (their own
@@ -397,8 +437,10 @@ def run_tight_ins(imu: ImuData, raw: RawGnss, cfg: TightInsConfig | None = None,
                   progress=None) -> TightInsResult:
     """Tightly coupled INS/GNSS over a record (module docstring); causal."""
     tcfg = cfg or TightInsConfig()
+    car = {"nhc": True, "grade_sigma": PLATFORMS["car"]["grade_sigma"]} \
+        if tcfg.platform == "car" else {}
     fcfg = FilterConfig.for_grade(tcfg.grade, receiver_clock=True, velocity_lag=False,
-                                  time_offset=False, **tcfg.filter)
+                                  time_offset=False, **{**car, **tcfg.filter})
     corr: CorrectedObservations = correct_observations(raw, tcfg.gnss, carry_geometry=True)
     obs = corr.obs
     # the reference constellation: GPS where there is GPS, else the most observed; up to four
@@ -480,7 +522,9 @@ def run_tight_ins(imu: ImuData, raw: RawGnss, cfg: TightInsConfig | None = None,
              "clock_drift_rw": None if q is None else float(np.clip(q, *tcfg.drift_rw_bounds)),
              "excluded": int(a["nx"].sum()) if len(t_ep) else 0,
              "clock_jumps": sum(1 for d in decisions if d.clock_jump_m != 0.0),
-             "variance_factor": float(nav.scale.value()), "grade": tcfg.grade}
+             "variance_factor": float(nav.scale.value()), "grade": tcfg.grade,
+             "motion_constraints": "car: non-holonomic, level road" if tcfg.platform == "car"
+             else "none", "nhc_refused": nav.nhc_refused}
     return TightInsResult(a["t"], a["lat"], a["lon"], a["h"], a["v"].reshape(-1, 3),
                           a["C"].reshape(-1, 3, 3), a["sig"].reshape(-1, 3), a["clk"],
                           a["drift"], a["nu"], a["nx"], decisions, start, stats)
