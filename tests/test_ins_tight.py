@@ -82,7 +82,7 @@ def test_psins_record_starts_at_rest_and_follows_its_fixes(psins):
     """Real record: the start at rest gyrocompasses (a FOG-class IMU), then the rows stay
     within 0.5 m RMS (2 m at most) of the receiver's own least-squares fix of each epoch (no
     truth: the fixes, with 0.2 m residuals, are the reference), under 2 % of the satellites
-    excluded (8 of 609: in the last 4 s of the record and once at 102 s, at 3.4–5.6σ)."""
+    excluded (none with the defaults; 8 of 609 with the clock noise learnt)."""
     path, imu, raw = psins
     r = _run(imu, raw)
     assert r.start["method"].startswith("at rest")

@@ -26,7 +26,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from selfnav.earth import WGS84, ecef_to_geodetic, enu_rotation
+from selfnav.earth import enu_rotation
 from selfnav.errors import InputError, SelfnavWarning
 from selfnav.gnss.atmosphere import (KLOBUCHAR_DEFAULT, azimuth_elevation, klobuchar,
                                      klobuchar_bds, saastamoinen)

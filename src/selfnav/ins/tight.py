@@ -18,13 +18,21 @@ Per epoch (:meth:`TightIns.add_epoch`), causal:
 3. **a receiver clock jump** (u-blox receivers step their clock by milliseconds) moves every
    pseudorange together: when most satellites fail and their innovations agree after their
    median is removed, the clock takes the median and its σ is reopened;
-4. the satellites kept update the filter in one joint update; then the range rates the same way.
+4. **no lock-out**: when most satellites fail but agree among themselves (their own
+   least-squares fix passes its χ² test), the INS is what is wrong and its position and
+   velocity covariance is reopened by the disagreement (:meth:`TightIns._reopen`);
+5. the satellites kept update the filter in one joint update; then the range rates the same way.
+
+Every constellation of the record is used: the reference clock is GPS's where there is GPS, the
+others' offsets against it are states (``states.inter_system``). With ``platform="car"`` the
+non-holonomic constraint and a level-road prior are applied between epochs, each only when its
+χ² test passes (an IMU not along the car is not forced to be).
 
 The pseudoranges' variance is the C/N0 model of :mod:`selfnav.gnss.raw` times a causal variance
 factor (:class:`selfnav.gnss.fde.VarianceScale`) of the past post-fit residuals.
 
-The receiver clock's frequency noise is learnt from the past (:class:`ClockNoise`): with few
-satellites a known clock is one more range.
+The receiver clock's frequency noise can be learnt from the past (:class:`ClockNoise`,
+``learn_clock``; off by default: too noisy an estimate to trust, docs/gnss.md).
 
 **Start** (:func:`start_tight`): the first epoch with a least-squares fix that passes its χ²
 test (:func:`selfnav.gnss.raw.spp_raw`, causal per epoch). At rest (the fixes' Doppler speed
@@ -78,8 +86,11 @@ class TightInsConfig:
     reopen_s : s over which a position error found when the INS is reopened is taken to have
         grown (its velocity share)
     learn_clock : learn the receiver clock's frequency random walk from the past epochs'
-        Doppler solutions (:class:`ClockNoise`), within ``drift_rw_bounds`` (m/s/√s); until
-        then, and without Doppler, the configuration's
+        Doppler solutions (:class:`ClockNoise`), within ``drift_rw_bounds`` (m/s/√s); off by
+        default: the Doppler solutions' noise (0.06–0.12 m/s per epoch on the simulated
+        drives) hides a TCXO's 0.01 m/s/√s over minutes, the estimate often fell to the floor
+        and a clock believed that stable made three satellites overconfident (RMS error/σ
+        3.2 on one drive, docs/gnss.md); the configuration's TCXO figure stands
     platform : ``"car"``: the non-holonomic constraint (every ``constraint_s`` while faster than
         ``constraint_speed`` m/s) and a level-road prior (:data:`selfnav.ins.config.PLATFORMS`'s
         car); anything else: no motion constraint (a walker, a boat or a drone slides sideways)
@@ -99,7 +110,7 @@ class TightInsConfig:
     min_speed: float = 3.0
     pos_sigma_floor: float = 5.0
     reopen_s: float = 10.0
-    learn_clock: bool = True
+    learn_clock: bool = False
     platform: str = "auto"
     constraint_s: float = 0.1
     constraint_speed: float = 1.0
