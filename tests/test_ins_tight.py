@@ -115,6 +115,25 @@ def test_psins_record_is_causal(psins):
     assert np.abs(np.array(d)).max() < 1e-3
 
 
+def test_a_receiver_drift_moves_the_least_squares_fix_as_asked(psins):
+    """``sim.faults.receiver_drift`` (an oracle for the drift tests): 0.5 m/s North for 40 s,
+    held — the receiver's own least-squares fixes move 20 m North, within 0.5 m."""
+    from selfnav.sim.faults import receiver_drift
+
+    path, imu, raw = psins
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        clean = spp_raw(raw, RawSppConfig(smoothing_s=0.0)).spp
+        ref = (float(np.nanmedian(clean.lat)), float(np.nanmedian(clean.lon)),
+               float(np.nanmedian(clean.h)))
+        moved = spp_raw(receiver_drift(raw, imu.t[0] + 85.0, 40.0, 0.5, (0, 1, 0), ref),
+                        RawSppConfig(smoothing_s=0.0)).spp
+    k = np.flatnonzero(clean.t >= imu.t[0] + 130.0)
+    d = np.array([enu_offset(clean.lat[i], clean.lon[i], clean.h[i], moved.lat[i],
+                             moved.lon[i], moved.h[i]) for i in k])
+    assert np.allclose(np.median(d, axis=0), [0.0, 20.0, 0.0], atol=0.5)
+
+
 @pytest.mark.filterwarnings("ignore::selfnav.errors.SelfnavWarning")
 def test_a_car_constraint_the_imu_refuses_is_not_forced(psins):
     """Real record: its IMU's y axis is 90° off the car's motion. With ``platform="car"`` the

@@ -89,3 +89,32 @@ def only_satellites(obs: GnssObservations, t_from: float, t_to: float, n: int):
     keep = cand[np.argsort(-cnt, kind="stable")[:n]]
     return obs.select(~win | np.isin(names, keep))
 
+
+def receiver_drift(raw, t_start: float, duration: float, rate: float, direction_enu, ref_llh,
+                   *, doppler: bool = False, hold: bool = True):
+    """A copy of a raw record (:class:`selfnav.io.gnss_raw.RawGnss`, with ephemerides) whose
+    pseudoranges move as by a receiver displaced ``rate`` m/s along ``direction_enu`` from
+    ``t_start`` (GPS s) for ``duration`` s, then held there (``hold``) or released: every
+    satellite by ``−u·d`` (``u`` its line of sight from ``ref_llh`` = (lat, lon rad, h m)) — a
+    spoofer's drag or issue 23's geometry-consistent drift, invisible to per-satellite tests.
+    ``doppler``: the Dopplers move with it (``−u·ḋ``)."""
+    from selfnav.earth import enu_rotation, geodetic_to_ecef
+    from selfnav.gnss.ephemeris import satellite_states, select_ephemeris
+
+    obs = raw.obs
+    dt = np.clip(obs.t - t_start, 0.0, None)
+    d = np.minimum(dt, duration) * rate if hold else np.where(dt <= duration, dt * rate, 0.0)
+    moving = (obs.t >= t_start) & (obs.t <= t_start + duration)
+    ie = select_ephemeris(raw.eph, obs.system, obs.prn, obs.t)
+    sat = satellite_states(raw.eph, ie, obs.t - 0.07)[0]
+    r0 = geodetic_to_ecef(*ref_llh)
+    u = sat - r0
+    u = u / np.linalg.norm(u, axis=1)[:, None]
+    e = enu_rotation(ref_llh[0], ref_llh[1]).T @ (np.asarray(direction_enu, float)
+                                                  / np.linalg.norm(direction_enu))
+    ue = np.nan_to_num(u @ e)
+    out = replace(obs, pseudorange=obs.pseudorange - ue * d, doppler=obs.doppler.copy())
+    if doppler:
+        out.doppler = obs.doppler + np.where(moving, ue * rate, 0.0) * obs.frequency / C_LIGHT
+    return replace(raw, obs=out)
+
