@@ -5,6 +5,7 @@ FILE --imu FILE``; issue 23, part 3) — the tables of docs/gnss.md.
     python benchmarks/bench_tight_ins.py --seeds 20 --grade consumer
     python benchmarks/bench_tight_ins.py --platform car     # with a car's motion constraints
     python benchmarks/bench_tight_ins.py --drift --seeds 0  # + a drift on every satellite (real)
+    python benchmarks/bench_tight_ins.py --canyon --no-real # streets: reflected satellites
 
 **Real** (``psins_insgpseo_tc``: 200 Hz IMU, GPS pseudoranges and Doppler, no independent truth):
 the rows against the receiver's own least-squares fixes, and 30 s in the drive with 3, 2 or 0
@@ -32,7 +33,7 @@ from selfnav.io.gnss_raw import sat_names
 from selfnav.io.psins_gnss import read_psins_gnss
 from selfnav.io.readers import read_imu
 from selfnav.sim.faults import SatelliteFault, inject_faults, only_satellites, receiver_drift
-from selfnav.sim.satellites import SatSimConfig, simulate_raw_drive
+from selfnav.sim.satellites import SatSimConfig, StreetCanyon, simulate_raw_drive
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
 
@@ -121,6 +122,36 @@ def drift():
                   f"{r.stats['excluded']} satellite-epochs excluded")
 
 
+def canyon(seeds, grade):
+    """SIMULATED car drives in a street (buildings 20 m high, 20 m apart, along 30°; a hidden
+    satellite reflected with probability 0.5, 20 m late on average): the tight filter against
+    the least-squares fixes with exclusion, and its error/σ."""
+    print(f"\nSIMULATED street drives (StreetCanyon 30°, 20 m wide, 20 m high, p_nlos 0.5, "
+          f"20 m), grade {grade}")
+    print("| seed | satellites (median) | tight RMS m | max m | RMS(e/σ) | excluded | SPP RMS m |")
+    print("| ---: | ---: | ---: | ---: | ---: | ---: | ---: |")
+    for seed in seeds:
+        cfg = SatSimConfig(seed=seed, canyon=StreetCanyon(azimuth_deg=30.0, width_m=20.0,
+                                                          height_m=20.0, p_nlos=0.5,
+                                                          nlos_bias_m=20.0))
+        tr, raw, imu = simulate_raw_drive("car", seed=seed, grade=grade, cfg=cfg)
+        r = run(imu, raw, grade)
+        tt, e, s = horizontal_error(r, tr, cfg.t0)
+        w = tt > 30.0
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            sp = spp_raw(raw).spp
+        ts = sp.t - cfg.t0
+        ok = np.isfinite(sp.lat) & (ts > 30.0)
+        la, lo, hh = (np.interp(ts[ok], tr.t, x) for x in (tr.lat, tr.lon, tr.h))
+        d = np.array([enu_offset(*a) for a in zip(la, lo, hh, sp.lat[ok], sp.lon[ok], sp.h[ok])])
+        n = r.n_used.sum() + r.n_excluded.sum()
+        print(f"| {seed} | {np.median(r.n_used):.0f} | {np.sqrt(np.mean(e[w] ** 2)):.2f} | "
+              f"{e[w].max():.1f} | {np.sqrt(np.mean((e[w] / s[w]) ** 2)):.1f} | "
+              f"{100 * r.n_excluded.sum() / max(n, 1):.0f} % | "
+              f"{np.sqrt(np.mean(d[:, 0] ** 2 + d[:, 1] ** 2)):.2f} |", flush=True)
+
+
 def simulated(seeds, grade):
     print(f"\nSIMULATED car drives, grade {grade}, seeds {seeds[0]}–{seeds[-1]}, platform "
           f"{PLATFORM}")
@@ -185,6 +216,7 @@ def main():
     ap.add_argument("--no-real", action="store_true")
     ap.add_argument("--platform", default="auto", help="car: the car's motion constraints")
     ap.add_argument("--drift", action="store_true", help="a drift on every satellite (real)")
+    ap.add_argument("--canyon", action="store_true", help="SIMULATED street drives instead")
     a = ap.parse_args()
     global PLATFORM
     PLATFORM = a.platform
@@ -193,7 +225,8 @@ def main():
     if a.drift:
         drift()
     if a.seeds > 0:
-        simulated(list(range(a.first, a.first + a.seeds)), a.grade)
+        seeds = list(range(a.first, a.first + a.seeds))
+        (canyon if a.canyon else simulated)(seeds, a.grade)
 
 
 if __name__ == "__main__":
