@@ -51,6 +51,7 @@ from scipy.stats import chi2
 
 from selfnav.errors import SelfnavError
 from selfnav.gnss.fde import VarianceScale
+from selfnav.gnss.mixture import MixtureModel, ResidualCorrelation
 from selfnav.gnss.raw import (C_LIGHT, CorrectedObservations, RawSppConfig, correct_observations,
                               spp_raw)
 from selfnav.io.gnss_raw import BEIDOU, GALILEO, GLONASS, GPS, QZSS, RawGnss, sat_names
@@ -91,6 +92,12 @@ class TightInsConfig:
         drives) hides a TCXO's 0.01 m/s/√s over minutes, the estimate often fell to the floor
         and a clock believed that stable made three satellites overconfident (RMS error/σ
         3.2 on one drive, docs/gnss.md); the configuration's TCXO figure stands
+    mixture : each satellite's error a mixture of line of sight and delayed components
+        (:class:`selfnav.gnss.mixture.MixtureModel`, fitted on the last ``tune_window`` s of
+        post-fit residuals every ``tune_every`` s), the component chosen per satellite by its
+        residual (max-mixture) — the odometry filter's model for reflected signals; with
+        ``correlation`` its variances times the AR(1) inflation ``(1 + ρ)/(1 − ρ)`` of the
+        line-of-sight residuals' lag-one correlation (at most ``max_inflation``)
     platform : ``"car"``: the non-holonomic constraint (every ``constraint_s`` while faster than
         ``constraint_speed`` m/s) and a level-road prior (:data:`selfnav.ins.config.PLATFORMS`'s
         car); anything else: no motion constraint (a walker, a boat or a drone slides sideways)
@@ -112,6 +119,11 @@ class TightInsConfig:
     reopen_s: float = 10.0
     learn_clock: bool = False
     platform: str = "auto"
+    mixture: bool = False
+    tune_window: float = 60.0
+    tune_every: float = 5.0
+    correlation: bool = True
+    max_inflation: float = 10.0
     constraint_s: float = 0.1
     constraint_speed: float = 1.0
     multi_system: bool = True
@@ -131,6 +143,7 @@ class EpochDecision:
     clock_jump_m: float = 0.0
     doppler_used: int = 0
     reopened: bool = False
+    delayed: list = field(default_factory=list)
 
 
 class TightIns:
@@ -146,6 +159,10 @@ class TightIns:
         self._t_grade = -np.inf
         self._gate2 = float(chi2.ppf(1.0 - cfg.alpha, 2))
         self.nhc_refused = 0
+        self.mixture = MixtureModel() if cfg.mixture else None
+        self.correlation = ResidualCorrelation(cfg.tune_window, 2.5, cfg.max_inflation)
+        self._tune_buf: list = []
+        self._next_tune = -np.inf
 
     def add_imu(self, t, omega_b, f_b):
         """A block of IMU samples (stamps in GNSS time, rates and specific forces); with a
@@ -211,16 +228,51 @@ class TightIns:
         flt.P[i, i] += dx[3] ** 2 + C[3, 3]
         return True
 
+    def _components(self, t, pr, sat, slot, cn0):
+        """Max-mixture (:class:`selfnav.gnss.mixture.MixtureModel`, the odometry filter's): each
+        satellite's component — line of sight or delayed — by its residual at the prediction;
+        returns the pseudoranges less the chosen means, their variances, the components."""
+        flt = self.flt
+        m = Pseudoranges(t, pr, sat, np.ones(len(pr)), slot).model(flt)
+        spread = np.einsum("ij,jk,ik->i", m.H, flt.P, m.H)
+        w, mu, var = self.mixture.components(cn0)
+        tot = var + spread[:, None]
+        e = -m.r
+        ll = np.log(w) - 0.5 * (np.log(tot) + (e[:, None] - mu) ** 2 / tot)
+        comp = np.argmax(ll, axis=1)
+        rows = np.arange(len(pr))
+        return pr - mu[rows, comp], var[rows, comp], comp
+
+    def _tune(self, t, pr, sat, slot, cn0):
+        """The mixture learns from the post-fit residuals of the last ``tune_window`` s."""
+        post = Pseudoranges(t, pr, sat, np.ones(len(pr)), slot).model(self.flt)
+        self._tune_buf.append((t, -post.r, np.asarray(cn0, float)))
+        while self._tune_buf and self._tune_buf[0][0] < t - self.cfg.tune_window:
+            self._tune_buf.pop(0)
+        if t >= self._next_tune:
+            self.mixture.fit(np.concatenate([b[1] for b in self._tune_buf]),
+                             np.concatenate([b[2] for b in self._tune_buf]))
+            self._next_tune = t + self.cfg.tune_every
+
     def add_epoch(self, t, names, pr, sat, var, rate=None, sat_vel=None, sat_drift_mps=None,
-                  rate_var=None, slot=None) -> EpochDecision:
+                  rate_var=None, slot=None, cn0=None) -> EpochDecision:
         """One epoch's corrected pseudoranges (and range rates) at GNSS time ``t``; ``slot``
-        the inter-system clock offset of each row (-1 or None: the reference constellation)."""
+        the inter-system clock offset of each row (-1 or None: the reference constellation);
+        ``cn0`` dBHz (the mixture's components)."""
         flt, cfg = self.flt, self.cfg
         names = np.asarray(names)
         s2 = self.scale.value() if len(self.scale.buf) >= self.scale.min_count else 1.0
         if slot is None or flt.layout.isb is None:
             slot = np.full(len(pr), -1)
         self._slot = slot = np.asarray(slot)
+        pr_raw, comp = pr, None
+        if self.mixture is not None:
+            cn0 = np.full(len(pr), 35.0) if cn0 is None else np.where(np.isfinite(cn0), cn0,
+                                                                        35.0)
+            pr, var, comp = self._components(t, pr, sat, slot, cn0)
+            # the mixture's σ is fitted to the residuals; errors correlated over epochs are
+            # worth fewer independent ones (the AR(1) variance of a mean, as the odometry filter)
+            s2 = self.correlation.inflation if cfg.correlation else 1.0
         m = Pseudoranges(t, pr, sat, var * s2, slot).model(flt)
         S = np.einsum("ij,jk,ik->i", m.H, flt.P, m.H) + np.diag(m.R)
         z = m.r / np.sqrt(S)
@@ -252,11 +304,18 @@ class TightIns:
         used = np.flatnonzero(ok)
         if len(used):
             flt.update(m.rows(used))
-            post = Pseudoranges(t, pr[used], sat[used], var[used], slot[used]).model(flt)
-            self.scale.add(post.r / np.sqrt(var[used]))
+            if self.mixture is not None:
+                self._tune(t, pr_raw[used], sat[used], slot[used], cn0[used])
+                post = Pseudoranges(t, pr[used], sat[used], var[used], slot[used]).model(flt)
+                self.correlation.add(t, names[used], post.r / np.sqrt(var[used]),
+                                     comp[used] == 0)
+            else:
+                post = Pseudoranges(t, pr[used], sat[used], var[used], slot[used]).model(flt)
+                self.scale.add(post.r / np.sqrt(var[used]))
         dec = EpochDecision(float(t), names[used].tolist(), names[~ok].tolist(),
                             dict(zip(names.tolist(), np.round(z, 2).tolist())), jump,
-                            reopened=reopened)
+                            reopened=reopened,
+                            delayed=[] if comp is None else names[comp >= 1].tolist())
         if cfg.doppler and rate is not None:
             good = np.isfinite(rate) & ok
             if np.any(good):
@@ -506,7 +565,7 @@ def run_tight_ins(imu: ImuData, raw: RawGnss, cfg: TightInsConfig | None = None,
             dec = nav.add_epoch(te, names_all[rows], corr.pr[rows], corr.sat[rows], corr.var[rows],
                                 rate_all[rows], corr.sat_vel[rows],
                                 C_LIGHT * corr.sat_drift[rows], rate_var_all[rows],
-                                slot_all[rows])
+                                slot_all[rows], corr.obs.cn0[rows])
         decisions.append(dec)
         ins = flt.ins
         out["t"].append(te)
