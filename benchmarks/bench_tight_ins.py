@@ -57,12 +57,13 @@ def horizontal_error(r, tr, t0):
 
 
 PLATFORM = "auto"
+OPTIONS = {}
 
 
 def run(imu, raw, grade):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        return run_tight_ins(imu, raw, TightInsConfig(grade=grade, platform=PLATFORM))
+        return run_tight_ins(imu, raw, TightInsConfig(grade=grade, platform=PLATFORM, **OPTIONS))
 
 
 def offsets(a, b):
@@ -217,9 +218,12 @@ def main():
     ap.add_argument("--platform", default="auto", help="car: the car's motion constraints")
     ap.add_argument("--drift", action="store_true", help="a drift on every satellite (real)")
     ap.add_argument("--canyon", action="store_true", help="SIMULATED street drives instead")
+    ap.add_argument("--mixture", action="store_true", help="TightInsConfig(mixture=True)")
     a = ap.parse_args()
     global PLATFORM
     PLATFORM = a.platform
+    if a.mixture:
+        OPTIONS["mixture"] = True
     if not a.no_real:
         real()
     if a.drift:

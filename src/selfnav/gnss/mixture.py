@@ -31,10 +31,13 @@ class MixtureModel:
          [0.9, 0.07, 0.03]]))
     sigma_los_min: float = 1.0
     sigma_los_max: float = 60.0
+    #: the least line-of-sight σ at 45 dBHz the fit may reach, m
+    sigma_los45_min: float = 0.5
 
     def copy(self):
         return MixtureModel(self.sigma_los45, self.means.copy(), self.sigmas.copy(),
-                            self.weights.copy(), self.sigma_los_min, self.sigma_los_max)
+                            self.weights.copy(), self.sigma_los_min, self.sigma_los_max,
+                            self.sigma_los45_min)
 
     def sigma_los(self, cn0):
         s = self.sigma_los45 * 10.0 ** ((45.0 - np.asarray(cn0, float)) / 20.0)
@@ -68,7 +71,7 @@ class MixtureModel:
             g = np.exp(ll)
             g /= g.sum(1, keepdims=True)
             s2 = np.sum(g[:, 0] * (e / scale) ** 2) / max(np.sum(g[:, 0]), 1e-9)
-            self.sigma_los45 = float(np.clip(np.sqrt(s2), 0.5, 15.0))
+            self.sigma_los45 = float(np.clip(np.sqrt(s2), self.sigma_los45_min, 15.0))
             lo = 0.0
             for k in range(1, K):
                 nk = max(np.sum(g[:, k]), 1e-9)

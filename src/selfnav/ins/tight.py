@@ -159,7 +159,9 @@ class TightIns:
         self._t_grade = -np.inf
         self._gate2 = float(chi2.ppf(1.0 - cfg.alpha, 2))
         self.nhc_refused = 0
-        self.mixture = MixtureModel() if cfg.mixture else None
+        # a receiver's code can be decimetres good (the PSINS record's): the floors are low
+        self.mixture = MixtureModel(sigma_los_min=0.1, sigma_los45_min=0.05) if cfg.mixture \
+            else None
         self.correlation = ResidualCorrelation(cfg.tune_window, 2.5, cfg.max_inflation)
         self._tune_buf: list = []
         self._next_tune = -np.inf
