@@ -51,8 +51,7 @@ def partial_sky(raw, t0, a, b, n):
 def horizontal_error(r, tr, t0):
     tt = r.t - t0
     la, lo, hh = (np.interp(tt, tr.t, x) for x in (tr.lat, tr.lon, tr.h))
-    d = np.array([enu_offset(la[i], lo[i], hh[i], r.lat[i], r.lon[i], r.h[i])
-                  for i in range(len(tt))])
+    d = enu_offset(la, lo, hh, r.lat, r.lon, r.h)
     return tt, np.hypot(d[:, 0], d[:, 1]), np.hypot(r.sigma_enu[:, 0], r.sigma_enu[:, 1])
 
 
@@ -70,8 +69,7 @@ def offsets(a, b):
     """Horizontal distance of rows of ``a`` from those of ``b`` at the same times."""
     k = np.searchsorted(b.t, a.t)
     ok = (k < len(b.t)) & (np.abs(b.t[np.minimum(k, len(b.t) - 1)] - a.t) < 1e-3)
-    d = np.array([enu_offset(b.lat[j], b.lon[j], b.h[j], a.lat[i], a.lon[i], a.h[i])
-                  for i, j in zip(np.flatnonzero(ok), k[ok])])
+    d = enu_offset(b.lat[k[ok]], b.lon[k[ok]], b.h[k[ok]], a.lat[ok], a.lon[ok], a.h[ok])
     return a.t[ok], np.hypot(d[:, 0], d[:, 1])
 
 
@@ -145,7 +143,7 @@ def canyon(seeds, grade):
         ts = sp.t - cfg.t0
         ok = np.isfinite(sp.lat) & (ts > 30.0)
         la, lo, hh = (np.interp(ts[ok], tr.t, x) for x in (tr.lat, tr.lon, tr.h))
-        d = np.array([enu_offset(*a) for a in zip(la, lo, hh, sp.lat[ok], sp.lon[ok], sp.h[ok])])
+        d = enu_offset(la, lo, hh, sp.lat[ok], sp.lon[ok], sp.h[ok])
         n = r.n_used.sum() + r.n_excluded.sum()
         print(f"| {seed} | {np.median(r.n_used):.0f} | {np.sqrt(np.mean(e[w] ** 2)):.2f} | "
               f"{e[w].max():.1f} | {np.sqrt(np.mean((e[w] / s[w]) ** 2)):.1f} | "
@@ -156,7 +154,8 @@ def canyon(seeds, grade):
 def simulated(seeds, grade):
     print(f"\nSIMULATED car drives, grade {grade}, seeds {seeds[0]}–{seeds[-1]}, platform "
           f"{PLATFORM}")
-    print("| seed | start | RMS m | RMS(e/σ) | 60 s: 3 sats (RMS e/σ) | 2 sats | 0 sats | ramp on 2: "
+    print("| seed | start | RMS m | RMS(e/σ) | 60 s: 3 sats (RMS e/σ) | 2 sats | 0 sats | "
+          "ramp on 2: "
           "excluded after | extra m | clock step: extra RMS m |")
     print("| ---: | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |")
     rows = []

@@ -91,8 +91,7 @@ def test_psins_record_starts_at_rest_and_follows_its_fixes(psins):
         warnings.simplefilter("ignore")
         s = spp_raw(raw, RawSppConfig(smoothing_s=0.0)).spp
     k = np.searchsorted(s.t, r.t)
-    d = np.array([enu_offset(s.lat[j], s.lon[j], s.h[j], r.lat[i], r.lon[i], r.h[i])
-                  for i, j in enumerate(k)])
+    d = enu_offset(s.lat[k], s.lon[k], s.h[k], r.lat, r.lon, r.h)
     eh = np.hypot(d[:, 0], d[:, 1])
     assert len(r.t) > 80
     assert np.sqrt(np.mean(eh**2)) < 0.5
@@ -110,9 +109,8 @@ def test_psins_record_is_causal(psins):
     part = _run(cut_imu, cut_raw)
     n = np.searchsorted(full.t, T, side="right")
     assert len(part.t) == n
-    d = [enu_offset(full.lat[i], full.lon[i], full.h[i], part.lat[i], part.lon[i], part.h[i])
-         for i in range(n)]
-    assert np.abs(np.array(d)).max() < 1e-3
+    d = enu_offset(full.lat[:n], full.lon[:n], full.h[:n], part.lat, part.lon, part.h)
+    assert np.abs(d).max() < 1e-3
 
 
 def test_a_receiver_drift_moves_the_least_squares_fix_as_asked(psins):
@@ -129,8 +127,8 @@ def test_a_receiver_drift_moves_the_least_squares_fix_as_asked(psins):
         moved = spp_raw(receiver_drift(raw, imu.t[0] + 85.0, 40.0, 0.5, (0, 1, 0), ref),
                         RawSppConfig(smoothing_s=0.0)).spp
     k = np.flatnonzero(clean.t >= imu.t[0] + 130.0)
-    d = np.array([enu_offset(clean.lat[i], clean.lon[i], clean.h[i], moved.lat[i],
-                             moved.lon[i], moved.h[i]) for i in k])
+    d = enu_offset(clean.lat[k], clean.lon[k], clean.h[k], moved.lat[k], moved.lon[k],
+                   moved.h[k])
     assert np.allclose(np.median(d, axis=0), [0.0, 20.0, 0.0], atol=0.5)
 
 
@@ -147,8 +145,7 @@ def test_a_car_constraint_the_imu_refuses_is_not_forced(psins):
         s = spp_raw(raw, RawSppConfig(smoothing_s=0.0)).spp
         mounted = read_imu(path, axes="RFU", mount="0,0,90")
     k = np.searchsorted(s.t, r.t)
-    d = np.array([enu_offset(s.lat[j], s.lon[j], s.h[j], r.lat[i], r.lon[i], r.h[i])
-                  for i, j in enumerate(k)])
+    d = enu_offset(s.lat[k], s.lon[k], s.h[k], r.lat, r.lon, r.h)
     assert np.sqrt(np.mean(d[:, 0] ** 2 + d[:, 1] ** 2)) < 0.5
     r2 = _run(mounted, raw, platform="car")
     assert r2.stats["nhc_refused"] < 10
@@ -185,8 +182,7 @@ def simulated_drive(seed, grade="industrial", duration=300.0):
 def horizontal_error(r, tr, t0):
     tt = r.t - t0
     la, lo, hh = (np.interp(tt, tr.t, x) for x in (tr.lat, tr.lon, tr.h))
-    d = np.array([enu_offset(la[i], lo[i], hh[i], r.lat[i], r.lon[i], r.h[i])
-                  for i in range(len(tt))])
+    d = enu_offset(la, lo, hh, r.lat, r.lon, r.h)
     return tt, np.hypot(d[:, 0], d[:, 1]), np.hypot(r.sigma_enu[:, 0], r.sigma_enu[:, 1])
 
 

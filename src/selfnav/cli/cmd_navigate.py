@@ -51,23 +51,35 @@ def _odometer(imu_path: Path, odo_path: Path | None):
     return read_odometer(imu_path) if has_odometer(imu_path) else None
 
 
-def _navigate_raw(path: Path, out: Path, *, smooth: bool, fix_log, out_datum: str,
-                  as_json: bool, drift_guard: bool) -> None:
-    """``navigate --gnss-raw``: :func:`selfnav.api.navigate_raw`, written and reported."""
+def _run_tight(label: str, call, out: Path, out_datum: str, comment: str, fix_log,
+               as_json: bool):
+    """A tightly coupled run (``call(progress)`` → Solution) under a progress bar, its solution
+    and per-satellite log written; returns ``(solution, seconds, span s)``."""
     from selfnav import api
     from selfnav.cli.progress import bar
 
     t0 = time.perf_counter()
-    with bar("navigating (tight)", enabled=not as_json) as update:
-        sol = api.navigate_raw(path, smooth=smooth, drift_guard=drift_guard,
-                               progress=lambda done, total: update(done / max(total, 1)))
+    with bar(label, enabled=not as_json) as update:
+        sol = call(lambda done, total: update(done / max(total, 1)))
     elapsed = time.perf_counter() - t0
-    sol.to_csv(out, datum=out_datum, comments=[
-        f"selfnav navigate --gnss-raw {path.name}{' --smooth' if smooth else ''}"])
+    sol.to_csv(out, datum=out_datum, comments=[comment])
     if fix_log is not None:
         api.write_tight_log(fix_log, sol)
+    return sol, elapsed, float(sol.t[-1] - sol.t[0]) if len(sol) > 1 else 0.0
+
+
+def _navigate_raw(path: Path, out: Path, *, smooth: bool, fix_log, out_datum: str,
+                  as_json: bool, drift_guard: bool) -> None:
+    """``navigate --gnss-raw``: :func:`selfnav.api.navigate_raw`, written and reported."""
+    from selfnav import api
+
+    sol, elapsed, span = _run_tight(
+        "navigating (tight)",
+        lambda progress: api.navigate_raw(path, smooth=smooth, drift_guard=drift_guard,
+                                          progress=progress),
+        out, out_datum, f"selfnav navigate --gnss-raw {path.name}{' --smooth' if smooth else ''}",
+        fix_log, as_json)
     s = sol.stats
-    span = float(sol.t[-1] - sol.t[0]) if len(sol) > 1 else 0.0
     summary = {"method": sol.method, "epochs": len(sol), "duration_s": span,
                "seconds": elapsed, "real_time_factor": span / max(elapsed, 1e-9), **s,
                "out": str(out)}
@@ -90,19 +102,15 @@ def _navigate_raw_imu(path: Path, imu: Path, out: Path, *, grade: str, platform:
                       out_datum: str, as_json: bool) -> None:
     """``navigate --gnss-raw FILE --imu FILE``: :func:`selfnav.api.navigate_raw_imu`."""
     from selfnav import api
-    from selfnav.cli.progress import bar
 
-    t0 = time.perf_counter()
-    with bar("navigating (tight, INS)", enabled=not as_json) as update:
-        sol = api.navigate_raw_imu(path, imu, grade=grade, platform=platform,
-                                   progress=lambda done, total: update(done / max(total, 1)))
-    elapsed = time.perf_counter() - t0
-    sol.to_csv(out, datum=out_datum, comments=[
-        f"selfnav navigate --gnss-raw {path.name} --imu {imu.name} (tightly coupled, causal)"])
-    if fix_log is not None:
-        api.write_tight_log(fix_log, sol)
+    sol, elapsed, span = _run_tight(
+        "navigating (tight, INS)",
+        lambda progress: api.navigate_raw_imu(path, imu, grade=grade, platform=platform,
+                                              progress=progress),
+        out, out_datum,
+        f"selfnav navigate --gnss-raw {path.name} --imu {imu.name} (tightly coupled, causal)",
+        fix_log, as_json)
     s = sol.stats
-    span = float(sol.t[-1] - sol.t[0]) if len(sol) > 1 else 0.0
     summary = {"method": sol.method, "epochs": len(sol), "duration_s": span,
                "seconds": elapsed, **s, "out": str(out)}
     if as_json:

@@ -538,8 +538,10 @@ def run_tight_ins(imu: ImuData, raw: RawGnss, cfg: TightInsConfig | None = None,
     t_obs = np.unique(obs.t)
     step = _interval(t_obs)
     grid = flt.ins.t + step * np.arange(1, int((imu.t[-1] - flt.ins.t) / step) + 1)
-    t_ep = np.union1d(t_obs, grid[np.abs(grid[:, None] - t_obs[None, :]).min(axis=1) > 1e-3]
-                      if len(grid) * len(t_obs) < 5e7 else grid)
+    k = np.searchsorted(t_obs, grid)
+    near = np.minimum(np.abs(grid - t_obs[np.clip(k - 1, 0, len(t_obs) - 1)]),
+                      np.abs(grid - t_obs[np.clip(k, 0, len(t_obs) - 1)]))
+    t_ep = np.union1d(t_obs, grid[near > 1e-3])
     t_ep = t_ep[(t_ep > flt.ins.t) & (t_ep <= imu.t[-1])]
     order = np.argsort(obs.t, kind="stable")
     ts = obs.t[order]
