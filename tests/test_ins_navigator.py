@@ -412,6 +412,32 @@ def test_a_start_made_inside_a_fault_is_given_up_when_the_fixes_heal():
     assert after.any() and e[after].max() < 20.0, e[after].max()
 
 
+def test_a_start_made_on_a_drag_is_given_up_when_the_map_refutes_it(karhula):
+    """A start made inside a drag from power-on (simulated issue-19 campaign drive
+    6634116843481227035 of master seed 2, consumer IMU, Kotka Karhula): when the drag is
+    switched off the INS carries its rate, and the clean fixes' offsets from it are the mirror
+    image of a drag — their likelihoods cannot choose. The map can: the dead reckoning's track
+    lies off the roads, the fixes' on them; the INS is restarted from the fixes. Before, the
+    navigator refused 105 s of clean fixes, then took a drift window's and ended 460 m off."""
+    from selfnav import campaigns
+    from selfnav.sim.scenarios import simulate
+
+    spec, sim_seed, wins = campaigns.roadnav_scenario(6634116843481227035,
+                                                      dict(campaigns.ROADNAV_DEFAULTS))
+    drag = [w for w in wins if w.kind == "drag" and w.start == 0.0]
+    drift = [w for w in wins if w.kind == "drift"]
+    assert drag and drift and spec["scenario"]["map"] == "kotka_karhula"
+    sim = simulate(spec, seed=sim_seed)
+    sol = selfnav.navigate(sim.imu, sim.gnss.as_gnss(), karhula)
+    t, dp, *_ = errors(sol, sim.truth)
+    e = np.hypot(dp[:, 0], dp[:, 1])
+    between = (t > drag[0].end + 60.0) & (t < drift[0].start)
+    after = t > drift[0].end + 30.0
+    assert between.any() and e[between].max() < 20.0, e[between].max()
+    assert after.any() and e[after].max() < 20.0, e[after].max()
+    assert e[(t > drift[0].start) & (t < drift[0].end)].max() < 30.0     # the drift refused
+
+
 def _earth_rate_n(f):
     from selfnav.earth import OMEGA_EARTH
 

@@ -523,6 +523,11 @@ class Integrity:
     fault_mean_s : the mean length of a GNSS fault, s: the prior odds that a fault seen ``d`` s
         ago has ended are ``e^{d/T} − 1`` (runs the evidence cannot tell from health are taken
         back after ``T ln(1/α)``; seed 004's windows last 30 s to 5 minutes)
+    map_fixes_llr : with a road map, the INS is lost when the map puts its recent track off
+        the roads by ``ln(1/α)`` beyond its σ while the fixes' track lies on them by at least
+        this log-likelihood ratio (against the same shape put elsewhere: a policy — 3, a fit
+        that one copy in twenty matches; at 1 dragged fixes lying on a parallel road by chance
+        restarted simulated drives onto them)
     lost_m, lost_mps, lost_rad, lost_mps2 : the INS-lost hypothesis of the run test: how far
         the dead reckoning may be off beyond its covariance, m, m/s, rad of heading and m/s² of
         acceleration
@@ -558,6 +563,7 @@ class Integrity:
     fault_ramp_onset_s: float = 10.0
     fault_ramp_change_s: float = 10.0
     fault_mean_s: float = 120.0
+    map_fixes_llr: float = 3.0
     lost_m: float = 1000.0
     lost_mps: float = 10.0
     lost_rad: float = 1.0

@@ -31,6 +31,14 @@ no reference left to say the fixes are the faulty side, is the other hypothesis 
 lost — after ``reinit_after_s``: ``M`` is restarted from the run (the GNSS branch).
 Rejections never widen ``P`` (a defence that inflates P relaxes its own gate).
 
+With a road map the INS-lost test also asks the map (evidence neither side controls: the car is
+on a road; :mod:`selfnav.roads.evidence`): how much better each track — the fixes', ``M``'s — lies
+on the roads within its σ than the same shape put elsewhere. An ``M`` whose track the map puts
+off the roads by ``ln(1/α)`` beyond its σ, while the fixes' track lies on them at chance level
+``q ≤ e^−map_fixes_llr``, is lost: restarted from the run. (An INS started on a drag carries
+the drag's rate after it is switched off; its offsets from the clean fixes are the mirror image
+of a drag, which the fixes' likelihoods alone cannot tell apart.)
+
 Outputs: every decision (:class:`selfnav.ins.policy.FixDecision`), the episodes (start, end,
 kind: outage / outliers / drag / ins-fault, largest separation) and per row a horizontal
 protection level at the configured integrity risk (:meth:`FaultBank.protection_level`).
@@ -45,6 +53,9 @@ import numpy as np
 from selfnav.earth import enu_offset
 from selfnav.ins.measurements import NonHolonomic, ZeroRate, ZeroVelocity
 from selfnav.ins.policy import FixStatus, chi2_gate, normal_quantile
+
+
+_MAP_LOOK_S = 1.0      # s between the INS-lost test's looks at the road map (its cost)
 
 
 @dataclass
@@ -148,6 +159,10 @@ class FaultBank:
         self.recoveries = 0
         self._sep_max = 0.0
         self.t_started = None           # the navigator's (re)start (:meth:`restart`)
+        #: the road map's word on the fixes' and ``M``'s tracks while an episode is open (the
+        #: road aid's :meth:`~selfnav.roads.aid.EkfRoadAid.track_evidence`), None without a map
+        self.road_aid = None
+        self._t_map = -np.inf
 
     # ------------------------------------------------------------------ references
     def restart(self, t):
@@ -553,7 +568,8 @@ class FaultBank:
         than its covariance says, by ``ln(1/α)`` over health and every fault model, outside
         its envelope (the bank's gate) and not as the fault seen at the onset would be, or the
         episode has outlasted ``max_fault_s`` (the longest GNSS fault the navigator holds out
-        against: seed 004's five minutes) with no reference left to say otherwise."""
+        against: seed 004's five minutes) with no reference left to say otherwise, or the road
+        map puts ``M``'s track off the roads and the fixes' on them (module docstring)."""
         from selfnav.ins.align import healthy_start
 
         ig = self.cfg.integrity
@@ -589,7 +605,22 @@ class FaultBank:
         # 400 m off)
         born_faulty = (ep.unwitnessed and ep.t_scattered is not None
                        and ep.t_fault is not None and tr[0].t > ep.t_fault)
-        if not (long or born_faulty):
+        # the map refutes M and takes the fixes: M's track lies off the roads by ln(1/α) more
+        # than its σ admits (against the same shape put elsewhere), while the fixes' lies on
+        # them better than chance — the INS is lost whatever the fixes' own likelihoods say (an
+        # INS started on a drag carries the drag's rate after it is switched off: its offsets
+        # from clean fixes are the mirror image of a drag, and the run test cannot choose)
+        on_roads = None
+        if self.road_aid is not None and not (long or born_faulty) and ep.origin is not None \
+                and t >= self._t_map + _MAP_LOOK_S - 1e-9:
+            # (at most once a second however fast the fixes come: each look costs ~10 ms)
+            self._t_map = float(t)
+            on_roads = self.road_aid.track_evidence(
+                ep.origin, P, np.array([f.p - f.offset for f in tr]), s_fix,
+                float(np.sqrt(np.linalg.eigvalsh(flt.P[:2, :2])[-1])))
+        map_lost = (on_roads is not None and on_roads[1] <= math.log(ig.p_false_alarm)
+                    and on_roads[0] >= ig.map_fixes_llr)
+        if not (long or born_faulty or map_lost):
             if test is None or test["log_lost"] < -math.log(ig.p_false_alarm):
                 return None
             o = np.array([f.offset for f in tr[-ig.run_min_fixes:]]).mean(axis=0)
@@ -600,6 +631,8 @@ class FaultBank:
                 return None
         why = (f"the episode outlasted {ig.max_fault_s:.0f} s" if long else
                "the start was made on the fixes that turned out faulty" if born_faulty else
+               f"the map puts the fixes on its roads (log-likelihood ratio {on_roads[0]:+.1f}) "
+               f"and the dead reckoning off them ({on_roads[1]:+.1f})" if map_lost else
                f"the dead reckoning is off by more than its σ (log Bayes factor "
                f"{test['log_lost']:+.1f} over health and faults)")
         return (f"the INS was lost: {len(tr)} fixes over {tt[-1] - tt[0]:.0f} s agree with each "

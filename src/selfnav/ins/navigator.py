@@ -636,6 +636,8 @@ class Navigator:
         if not cfg.adaptation.vibration:
             self.vib_reference = None
         self.bank = FaultBank(cfg, self.adapter)
+        if self.road_aid is not None and hasattr(self.road_aid, "track_evidence"):
+            self.bank.road_aid = self.road_aid
         self._ins_vouched = False
         t0 = float(init["t"])
         self.bank.restart(t0)

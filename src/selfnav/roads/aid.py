@@ -17,6 +17,7 @@ from selfnav.ins.align import robust_init
 from selfnav.ins.config import CHI2_2_999, chi2_999
 from selfnav.ins.measurements import LevelRoad, RoadLine
 from selfnav.roads.corners import corner_candidates, line_intersection
+from selfnav.roads.evidence import on_roads_llr, thin_track
 from selfnav.roads.graph import RoadGraph
 from selfnav.roads.particles import TWO_PI, MatcherConfig, RoadParticles, wrap
 
@@ -172,6 +173,8 @@ class EkfRoadAid:
     While the navigator takes no fixes (``dead_reckoning``: a fault episode, an outage) the
     cloud follows the dead reckoning: no constraint is given but the level-road prior once the
     filter's horizontal σ is above ``dr_sigma_m``.
+    evidence_min_m : :meth:`track_evidence` — the fixes' and the INS's tracks must be this
+        far apart (m, and three times their σ) for the map to speak
     line_agree : a corner's leg — and, while dead-reckoning, a road line — is a constraint
         only while the INS heading runs along it within this or three of the filter's heading
         σ, rad (a car not turning drives along its road; the lane changes and the map's
@@ -197,7 +200,7 @@ class EkfRoadAid:
                  agree_m=10.0, arc_agree_m=4.0, bend_zone=25.0, grade_sigma=0.08, seed=0,
                  lock_m=5.0,
                  sigma_corner=2.5, q_along=0.01, curve_sigma=None, max_sigma_m=30.0,
-                 dr_sigma_m=10.0, line_agree=np.radians(8.0)):
+                 dr_sigma_m=10.0, line_agree=np.radians(8.0), evidence_min_m=20.0):
         self.g = graph
         self.pf = RoadParticles(graph, cfg, seed)
         self.fix_t, self.fix_xy, self.sig = [], [], []     # the fixes as they arrive
@@ -241,6 +244,7 @@ class EkfRoadAid:
         #: by more than its σ says, and the road lines are what correct it (:meth:`constraints`)
         self.ins_vouched = True
         self.lock = None           # (t, normal) of the last constraint that found the filter on it
+        self.evidence_min_m = evidence_min_m
 
     # ------------------------------------------------------------------ the stream
     def add_fix(self, t, lat, lon, sigma):
@@ -250,6 +254,34 @@ class EkfRoadAid:
         self.fix_t.append(float(t))
         self.fix_xy.append((float(x), float(y)))
         self.sig.append(float(sigma) if np.isfinite(sigma) else self.pf.cfg.sigma_gnss)
+
+    def track_evidence(self, origin, p_fix, p_ins, sigma_fix, sigma_ins):
+        """The map's word on two tracks of the same seconds (the fault bank's run test, while the
+        fixes and the INS disagree): ``(e_fix, e_ins)``, each track's
+        :func:`selfnav.roads.evidence.on_roads_llr` — how much better it lies on the roads
+        within its σ than the same shape put elsewhere — or None while the two are within
+        ``evidence_min_m`` and three times their σ of each other (they put the car in the same
+        place). ``origin`` (lat, lon rad); tracks East/North m from it, thinned along the
+        fixes' track (25 m)."""
+        p_fix = np.asarray(p_fix, float)
+        p_ins = np.asarray(p_ins, float)
+        if len(p_fix) < 2:
+            return None
+        keep = thin_track(p_fix)
+        sep = float(np.median(np.hypot(*(p_fix[keep] - p_ins[keep]).T)))
+        if sep < max(self.evidence_min_m, 3.0 * math.hypot(sigma_fix, sigma_ins)):
+            return None
+        x0, y0 = self.g.to_local(origin[0], origin[1])
+        x0, y0 = float(x0), float(y0)
+        gam = float(self.g.true_heading_offset(x0, y0))
+        c, s = math.cos(gam), math.sin(gam)
+
+        def local(p):
+            return np.column_stack([x0 + p[:, 0] * c - p[:, 1] * s,
+                                    y0 + p[:, 1] * c + p[:, 0] * s])
+
+        return (on_roads_llr(self.g, local(p_fix[keep]), sigma_fix),
+                on_roads_llr(self.g, local(p_ins[keep]), sigma_ins))
 
     def start_check(self, imu, gnss, cfg, start=None):
         """The navigator's start (``start``, as :func:`start_on_roads` takes it), checked
