@@ -12,6 +12,7 @@ import math
 
 import numpy as np
 
+from selfnav.earth import offset_to_geodetic
 from selfnav.errors import SelfnavError
 from selfnav.ins.align import robust_init
 from selfnav.ins.config import CHI2_2_999, chi2_999
@@ -271,14 +272,12 @@ class EkfRoadAid:
         sep = float(np.median(np.hypot(*(p_fix[keep] - p_ins[keep]).T)))
         if sep < max(self.evidence_min_m, 3.0 * math.hypot(sigma_fix, sigma_ins)):
             return None
-        x0, y0 = self.g.to_local(origin[0], origin[1])
-        x0, y0 = float(x0), float(y0)
-        gam = float(self.g.true_heading_offset(x0, y0))
-        c, s = math.cos(gam), math.sin(gam)
 
         def local(p):
-            return np.column_stack([x0 + p[:, 0] * c - p[:, 1] * s,
-                                    y0 + p[:, 1] * c + p[:, 0] * s])
+            # the inverse of the ENU offsets the bank took (selfnav.earth.enu_offset)
+            lat, lon, _ = offset_to_geodetic(float(origin[0]), float(origin[1]), 0.0,
+                                             np.column_stack([p, np.zeros(len(p))]))
+            return np.column_stack(self.g.to_local(lat, lon))
 
         return (on_roads_llr(self.g, local(p_fix[keep]), sigma_fix),
                 on_roads_llr(self.g, local(p_ins[keep]), sigma_ins))
