@@ -140,6 +140,11 @@ class StateOptions:
     time_offset_window_s : s of the past each re-estimate uses
     time_offset_settled_s : no re-estimate once the state's σ is below this, s
     time_offset_coarse_s : the re-estimate moves the state only beyond this, s (its accuracy)
+    installation_bound : policy: the time offset, clock drift, lever arm, velocity lag and
+        odometer scale are held within this many of their prior σ of their prior value — beyond
+        it a state is not the installation's but a fault the fixes carry (a drift along the
+        road became a clock drift of 58 % and a lever arm of 558 m, simulated drive
+        6129180605438802640); None: unbounded
     velocity_lag : estimate the lag of the GNSS velocity behind its positions (+1), s, where
         the fixes carry a velocity
     velocity_lag_sigma : its initial σ, s (a post-processor's interval velocity: half a
@@ -180,6 +185,7 @@ class StateOptions:
     time_offset_window_s: float = 300.0
     time_offset_settled_s: float = 0.002
     time_offset_coarse_s: float = 0.1
+    installation_bound: float | None = 5.0
     velocity_lag: bool = True
     velocity_lag_sigma: float = 0.2
     velocity_lag_rw: float = 1e-5
@@ -501,8 +507,9 @@ class Integrity:
     onset_s : s of fixes after an episode opens that characterise the fault (a smooth fault
         is then extrapolated: the fixes are taken back when they no longer follow it)
     reinit_after_s : s of fixes that agree with each other and move with the INS but stand
-        outside its envelope before the INS, not the GNSS, is taken as the faulty side; and
-        the span of fixes the navigator restarts from when the INS is lost
+        outside its envelope before the INS, not the GNSS, is taken as the faulty side; the
+        span of fixes the navigator restarts from when the INS is lost; and the span of the
+        tracks the road map judges (:meth:`selfnav.ins.hypotheses.FaultBank._map_look`)
     max_fault_s : the longest GNSS fault the navigator holds out against (seed 004: outliers
         for up to 5 minutes): fixes that agree with each other after an episode this long,
         with no reference left, restart the INS
@@ -527,7 +534,9 @@ class Integrity:
         the roads by ``ln(1/α)`` beyond its σ while the fixes' track lies on them by at least
         this log-likelihood ratio (against the same shape put elsewhere: a policy — 3, a fit
         that one copy in twenty matches; at 1 dragged fixes lying on a parallel road by chance
-        restarted simulated drives onto them)
+        restarted simulated drives onto them); and, the other way, the navigator goes back to
+        a dead reckoning whose track the map puts on the roads by this much while the
+        solution that took the fixes it puts off them by ``ln(1/α)``
     lost_m, lost_mps, lost_rad, lost_mps2 : the INS-lost hypothesis of the run test: how far
         the dead reckoning may be off beyond its covariance, m, m/s, rad of heading and m/s² of
         acceleration

@@ -731,6 +731,24 @@ class InsGnssFilter:
             self.rx_drift -= float(dx[lay.clk.start + 1])
         if lay.isb is not None:
             self.rx_isb -= dx[lay.isb]
+        if self.cfg.states.installation_bound is not None:
+            self._hold_installation()
+
+    def _hold_installation(self):
+        """The installation's states held within ``states.installation_bound`` prior σ of their
+        prior (StatesConfig): a physical bound, not a statistical one."""
+        st, lay = self.cfg.states, self.layout
+        k = st.installation_bound
+        for block, name, sigma in ((lay.toff, "time_offset", st.time_offset_sigma),
+                                   (lay.tdrift, "clock_drift", st.clock_drift_sigma),
+                                   (lay.vlag, "velocity_lag", st.velocity_lag_sigma),
+                                   (lay.odo, "odo_scale", st.odometer_scale_sigma)):
+            if block is not None:          # the prior is zero
+                setattr(self, name, min(max(getattr(self, name), -k * sigma), k * sigma))
+        if lay.lever is not None:
+            c = np.asarray(self.cfg.gnss.lever_arm_b, dtype=float).reshape(3)
+            b = k * st.lever_arm_sigma
+            np.clip(self.lever_b, c - b, c + b, out=self.lever_b)
 
     def kalman(self, r, H, R):
         """Apply a measurement (residual ``h(x̃) − z``, Jacobian ``H``, noise ``R``) and correct
