@@ -37,7 +37,13 @@ on the roads within its σ than the same shape put elsewhere. An ``M`` whose tra
 off the roads by ``ln(1/α)`` beyond its σ, while the fixes' track lies on them at chance level
 ``q ≤ e^−map_fixes_llr``, is lost: restarted from the run. (An INS started on a drag carries
 the drag's rate after it is switched off; its offsets from the clean fixes are the mirror image
-of a drag, which the fixes' likelihoods alone cannot tell apart.)
+of a drag, which the fixes' likelihoods alone cannot tell apart.) And the other way, while no
+episode is open: ``M``'s own track — it took the fixes — off the roads by ``ln(1/α)`` beyond its
+σ, while a dead reckoning's track lies on them at ``q ≤ e^−map_fixes_llr``, says the fixes
+dragged ``M``; it goes back to that dead reckoning. With a map the bank also carries
+**witnesses** while no mature reference stands (right after a start, while its heading
+hypotheses resolve, while covariance reopenings keep the references' health clock from
+running): dead reckonings no envelope test uses, judged by the map alone.
 
 Outputs: every decision (:class:`selfnav.ins.policy.FixDecision`), the episodes (start, end,
 kind: outage / outliers / drag / ins-fault, largest separation) and per row a horizontal
@@ -64,6 +70,9 @@ class Reference:
 
     t0: float
     flt: object
+    track: list = field(default_factory=list)   # (t, its lat, lon, M's lat, lon) once a
+                                                # second over the last reinit_after_s, with a
+                                                # road map (FaultBank._map_look)
 
 
 @dataclass
@@ -163,6 +172,11 @@ class FaultBank:
         #: road aid's :meth:`~selfnav.roads.aid.EkfRoadAid.track_evidence`), None without a map
         self.road_aid = None
         self._t_map = -np.inf
+        self._t_track = -np.inf
+        self._map_alarm = None          # (reference, why): the map refuted M for it
+        self.m_track = []               # (t, lat, lon) of M once a second, with a road map
+        self.witnesses: list[Reference] = []   # dead reckonings only the map judges (maintain)
+        self._t_witness = -np.inf
 
     # ------------------------------------------------------------------ references
     def restart(self, t):
@@ -170,6 +184,9 @@ class FaultBank:
         one, and none of its own exists yet."""
         self.refs = []
         self.t_started = float(t)
+        self._map_alarm = None
+        self.m_track = []
+        self.witnesses = []
         self.forget_innovations()
 
     def on_imu(self, t, dtheta, dv, dt):
@@ -177,7 +194,7 @@ class FaultBank:
         ``reference_step_s``. Whether the samples were still is known only when the
         navigator has judged their aiding block (:meth:`judged`): until then they count as
         moving."""
-        if not self.refs:
+        if not (self.refs or self.witnesses):
             return
         step = self.cfg.integrity.reference_step_s - 1e-9
         while len(t):
@@ -189,7 +206,7 @@ class FaultBank:
                 return
             self._buf.append([t[:j + 1], dtheta[:j + 1], dv[:j + 1], dt[:j + 1], None])
             self.flush()
-            if not self.refs:
+            if not (self.refs or self.witnesses):
                 return
             t, dtheta, dv, dt = t[j + 1:], dtheta[j + 1:], dv[j + 1:], dt[j + 1:]
 
@@ -215,7 +232,7 @@ class FaultBank:
         self._buf = []
         self._t_step = float(t[-1])
         veh = self.cfg.vehicle
-        for ref in self.refs:
+        for ref in self.dead_reckonings:
             f = ref.flt
             i = int(np.searchsorted(t, f.ins.t + 1e-12, side="right"))   # t is increasing
             if i == len(t):
@@ -237,24 +254,90 @@ class FaultBank:
                 f.update(NonHolonomic(k * veh.nhc_sigma,
                                       k * (veh.nhc_sigma_up or veh.nhc_sigma)).model(f))
 
-    def maintain(self, t, flt):
+    def maintain(self, t, flt, *, resolving: bool = False):
         """Branch a new reference from ``M`` every ``branch_every_s`` while the GNSS is healthy;
-        keep the oldest reference of each age octave, none older than ``max_age_s``."""
+        keep the oldest reference of each age octave, none older than ``max_age_s``. With a
+        road map, also **witnesses** while no mature reference stands (``resolving``: ``M`` is
+        the best of the start's heading hypotheses): dead reckonings branched on the same
+        clock but not judged healthy first, used by no envelope test — only by the map
+        (:meth:`_map_look`), which judges their tracks itself. (The references' health clock
+        can stall for minutes: a drag soon after a consumer start kept reopening ``M``'s
+        covariance, and each reopening restarts the clock.)"""
         ig = self.cfg.integrity
         if not ig.bank:
             return
-        if self.episode is None and self.t_healthy is not None \
+        if not resolving and self.episode is None and self.t_healthy is not None \
                 and t - self.t_healthy >= ig.branch_after_s - 1e-9 \
                 and t - self._t_branch >= ig.branch_every_s - 1e-9:
             self.flush()
             self.refs.append(Reference(t, flt.copy()))
             self._t_branch = t
         self._prune(t)
+        if self.road_aid is None or self.episode is not None:
+            return
+        if not self.mature(t) and t - self._t_witness >= ig.branch_every_s - 1e-9:
+            self.flush()
+            self.witnesses.append(Reference(t, flt.copy()))
+            self._t_witness = t
+        self.witnesses = self._octaves(t, self.witnesses)
+        if t >= self._t_track + _MAP_LOOK_S - 1e-9:
+            self._t_track = float(t)
+            self._map_look(t, flt, look=not resolving)
+
+    def _map_look(self, t, flt, look=True):
+        """With a road map, while no episode is open (the mirror of the INS-lost test's look):
+        ``M``'s track over the last ``reinit_after_s`` — it took the fixes — lying off the roads
+        by ``ln(1/α)`` beyond its σ (against the same shape put elsewhere) says the fixes dragged
+        it there, a drag their own tests and a consumer IMU's wide envelopes let through
+        (simulated drive 7821150004149555261: 2 m/s, followed to 420 m at σ 5 m). The next
+        fix's decision opens an episode, resetting ``M`` to the youngest mature reference or
+        witness that has parted from it (over the same seconds, :meth:`EkfRoadAid.track_evidence
+        <selfnav.roads.aid.EkfRoadAid.track_evidence>`) and whose track the map puts on its
+        roads at ``q ≤ e^−map_fixes_llr``, if one does; if none does, nothing is done (an
+        episode on the map's word alone, with ``M`` carrying the drag's velocity, took the
+        fixes back as healthy against it)."""
+        ig = self.cfg.integrity
+        self.flush()
+        self.m_track = [p for p in self.m_track if p[0] >= t - ig.reinit_after_s - 1e-9] + \
+            [(t, flt.ins.lat, flt.ins.lon)]
+        for ref in self.dead_reckonings:
+            ref.track = [r for r in ref.track if r[0] >= t - ig.reinit_after_s - 1e-9] + \
+                [(t, ref.flt.ins.lat, ref.flt.ins.lon, flt.ins.lat, flt.ins.lon)]
+        tr = np.array(self.m_track)
+        if not look or self._map_alarm is not None \
+                or tr[-1, 0] - tr[0, 0] < ig.reinit_after_s - 1e-9:
+            return
+        s_m = float(np.sqrt(np.linalg.eigvalsh(flt.P[:2, :2])[-1]))
+        e_m = self.road_aid.track_off_roads(tr[:, 1:], s_m)
+        if e_m is None or e_m > math.log(ig.p_false_alarm):
+            return
+        why = (f"the map puts the solution that took the fixes off its roads (log-likelihood "
+               f"ratio {e_m:+.1f} over the last {ig.reinit_after_s:.0f} s)")
+        candidates = sorted(self.mature(t) + [w for w in self.witnesses
+                                              if t - w.t0 >= ig.min_age_s - 1e-9],
+                            key=lambda r: r.t0)
+        for ref in reversed(candidates):                # the youngest the map puts on them
+            if len(ref.track) < 2:
+                continue
+            rt = np.array(ref.track)[:, 1:]
+            s_b = float(np.sqrt(np.linalg.eigvalsh(ref.flt.P[:2, :2])[-1]))
+            o = rt[0, 2:]
+            p_m = np.array([enu_offset(o[0], o[1], 0.0, a, b, 0.0)[:2] for a, b in rt[:, 2:]])
+            p_b = np.array([enu_offset(o[0], o[1], 0.0, a, b, 0.0)[:2] for a, b in rt[:, :2]])
+            ev = self.road_aid.track_evidence(o, p_m, p_b, s_m, s_b)
+            if ev is not None and ev[1] >= ig.map_fixes_llr:
+                self._map_alarm = (ref, f"{why} and the dead reckoning since {ref.t0:.1f} s on "
+                                        f"them ({ev[1]:+.1f})")
+                return
 
     def _prune(self, t):
+        self.refs = self._octaves(t, self.refs)
+
+    def _octaves(self, t, refs):
+        """The oldest of each age octave, none older than ``max_age_s``."""
         ig = self.cfg.integrity
         keep, octaves = [], set()
-        for ref in self.refs:                       # oldest first
+        for ref in refs:                            # oldest first
             age = t - ref.t0
             if age > ig.max_age_s:
                 continue
@@ -264,7 +347,12 @@ class FaultBank:
                 continue
             octaves.add(o)
             keep.append(ref)
-        self.refs = keep
+        return keep
+
+    @property
+    def dead_reckonings(self) -> list:
+        """The references and the map's witnesses: every dead reckoning the bank carries."""
+        return self.refs + self.witnesses
 
     def mature(self, t):
         """References old enough to judge fixes (at least one reference step old)."""
@@ -288,6 +376,16 @@ class FaultBank:
                            "" if ok else f"χ² gate (NIS {nis:.3g})", nis, apply=ok)
         if self.episode is not None:
             return self._judge_episode(flt, m_pos, t, nis)
+        if self._map_alarm is not None:
+            ref, why = self._map_alarm
+            self._map_alarm = None
+            self.m_track = []
+            if any(r is ref for r in self.dead_reckonings):
+                self.flush()
+                self._open(ref.t0, reset=True)
+                self.refs = [r for r in self.refs if r.t0 <= ref.t0]
+                return Verdict(FixStatus.REJECTED, why, nis, reset_to=ref.flt,
+                               excluded_since=ref.t0)
         if nis > self.gate:
             self.streak += 1
             self.used_streak = 0
@@ -782,6 +880,8 @@ class FaultBank:
 
     def _open(self, t, reset, sep=0.0):
         self.forget_innovations()
+        self.witnesses = []             # (normal mode's: the episode's M is another track)
+        self.m_track = []
         self.episode = Episode(t, reset=reset, kind="drag" if reset else "outliers",
                                max_separation_m=sep,
                                unwitnessed=(self.t_started is not None

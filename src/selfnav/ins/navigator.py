@@ -594,6 +594,8 @@ class Navigator:
                                             and cfg.states.velocity_lag),
                           odometer=bool(cfg.states.odometer or st.odometer))
         notes = list(start.notes)
+        if init.get("off_map"):
+            notes.append("the fixes lie where the map has no roads: started without its check")
         if init.get("fallback") and cfg.vehicle.platform == "auto":
             # the car's start found no car (issue 20): a slow platform's constraints
             notes.append(f"slow platform: {init['fallback']} (--platform says which)")
@@ -870,7 +872,7 @@ class Navigator:
         if self.vib_reference is not None:
             kv = vibration_scale(vibration_level(w_blk, f_blk), self.vib_reference,
                                  self.cfg.adaptation.vibration_cap)
-            for f in self._filters() + [ref.flt for ref in self.bank.refs]:
+            for f in self._filters() + [ref.flt for ref in self.bank.dead_reckonings]:
                 f.vibration = kv
         for f in self._filters():
             dx = np.zeros(f.nx)
@@ -926,7 +928,9 @@ class Navigator:
                     if f is flt:
                         self._dx = self._dx + dx
         if self._hyp is not None:
-            return             # no references or time-offset search until resolved
+            # no references or time-offset search until resolved; the map's witnesses only
+            self.bank.maintain(te, flt, resolving=True)
+            return
         self.bank.maintain(te, flt)
         if flt.layout.toff is not None:
             self._check_time_offset(te)
@@ -1043,7 +1047,7 @@ class Navigator:
             print(f"toff check t={t:.1f} est {tau:+.4f}±{s_tau:.4f} state {flt.time_offset:+.4f}±{s_cur:.4f} drift {flt.clock_drift*1e6:.0f} ppm")
         if abs(d) > max(st.time_offset_coarse_s, 3.0 * np.hypot(s_tau, s_cur)):
             # the offset is the hardware's, not a hypothesis': the references take it too
-            for f in [flt] + [r.flt for r in self.bank.refs]:
+            for f in [flt] + [r.flt for r in self.bank.dead_reckonings]:
                 d_f = tau - f.time_offset
                 f.time_offset = tau
                 f.P[i, :] = 0.0
@@ -1068,7 +1072,7 @@ class Navigator:
             # (the clock drift had absorbed the difference: drive_0708 with its IMU stamps
             # 0.25 s off, 87 ms at a σ of 10 ms and −2100 ppm) — the state keeps its value and
             # the filter refines it from a σ that covers the difference, the drift from its prior
-            for f in [flt] + [r.flt for r in self.bank.refs]:
+            for f in [flt] + [r.flt for r in self.bank.dead_reckonings]:
                 f.P[i, :] = 0.0
                 f.P[:, i] = 0.0
                 f.P[i, i] = s_cur ** 2 + d * d

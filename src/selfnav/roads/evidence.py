@@ -58,7 +58,11 @@ def shifts(n: int = 128, min_shift_m: float = 40.0, max_shift_m: float = 300.0) 
     return np.column_stack([r * np.sin(a), r * np.cos(a)])
 
 
-def on_roads_llr(graph: RoadGraph, xy, sigma_m: float, *, sigma_road_m: float = 2.5,
+#: m: the lane and the map's digitising — how far a car on a mapped road lies from its line
+SIGMA_ROAD_M = 2.5
+
+
+def on_roads_llr(graph: RoadGraph, xy, sigma_m: float, *, sigma_road_m: float = SIGMA_ROAD_M,
                  eps: float = 0.05, spread_m: float = 100.0, offsets=None) -> float:
     """Log-likelihood ratio of "the track ``xy`` (local East/North m of ``graph``, already thinned:
     :func:`thin_track`) is where the car drove, within ``sigma_m``" against "it is the car's
