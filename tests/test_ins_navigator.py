@@ -229,6 +229,26 @@ def _filter_at(C_nb, P_att=np.radians(5.0)):
     return f
 
 
+def test_the_installation_states_are_held_within_their_physical_bounds():
+    """A correction that would put the lever arm 20 m and the IMU clock 5 % off (a fault the
+    fixes carry, taken for the installation: simulated drive 6129180605438802640 ended with a
+    558 m lever arm and a 58 % clock drift) leaves them at ``states.installation_bound`` (5)
+    prior σ: 2.5 m, 1.5 s, 2500 ppm; a correction inside the bound is taken whole."""
+    cfg = selfnav.ins.navigator_config("industrial")        # the lever arm estimated
+    f = InsGnssFilter(cfg, 0.0, 0.7, 0.4, 10.0, np.array([10.0, 0.0, 0.0]), np.eye(3))
+    lay, st = f.layout, f.cfg.states
+    assert lay.lever is not None and lay.toff is not None and lay.tdrift is not None
+    dx = np.zeros(f.nx)
+    dx[lay.lever] = [-20.0, 0.3, 20.0]               # x <- x - dx
+    dx[lay.toff.start] = 4.0
+    dx[lay.tdrift.start] = -0.05
+    f._correct(dx)
+    b = st.installation_bound
+    assert np.allclose(f.lever_b, [b * st.lever_arm_sigma, -0.3, -b * st.lever_arm_sigma])
+    assert f.time_offset == pytest.approx(-b * st.time_offset_sigma)
+    assert f.clock_drift == pytest.approx(b * st.clock_drift_sigma)
+
+
 def test_heading_and_road_measurements_move_toward_truth():
     C_true = att.dcm_nb_from_euler(0.0, 0.0, np.radians(90.0))
     C_est = att.dcm_nb_from_euler(0.0, 0.0, np.radians(93.0))
@@ -436,6 +456,76 @@ def test_a_start_made_on_a_drag_is_given_up_when_the_map_refutes_it(karhula):
     assert between.any() and e[between].max() < 20.0, e[between].max()
     assert after.any() and e[after].max() < 20.0, e[after].max()
     assert e[(t > drift[0].start) & (t < drift[0].end)].max() < 30.0     # the drift refused
+
+
+def test_a_drag_soon_after_the_start_is_refused_when_the_map_witnesses_a_dead_reckoning(karhula):
+    """A 2 m/s drag from 57 s, 20 s after a consumer start (simulated issue-19 campaign drive
+    7821150004149555261 of master seed 2, Kotka Karhula): while the heading hypotheses resolve
+    and the covariance reopenings keep the references' health clock from running, no
+    reference stands, and the fixes drag the solution off — before, to 550 m at σ 5–100 m. A
+    witness (a dead reckoning the map alone judges) branched before the drag lies on the
+    roads while the solution's track leaves them: the navigator goes back to it."""
+    from selfnav import campaigns
+    from selfnav.sim.scenarios import simulate
+
+    spec, sim_seed, wins = campaigns.roadnav_scenario(7821150004149555261,
+                                                      dict(campaigns.ROADNAV_DEFAULTS))
+    drag = [w for w in wins if w.kind == "drag"]
+    assert drag and drag[0].start > 30.0 and spec["scenario"]["map"] == "kotka_karhula"
+    sim = simulate(spec, seed=sim_seed)
+    sol = selfnav.navigate(sim.imu, sim.gnss.as_gnss(), karhula)
+    t, dp, *_ = errors(sol, sim.truth)
+    e = np.hypot(dp[:, 0], dp[:, 1])
+    during = (t > drag[0].start + 60.0) & (t < drag[0].end)
+    assert during.any() and e[during].max() < 40.0, e[during].max()
+    assert any("the map puts the solution" in r for r in sol.detail.fix_log["reason"])
+
+
+def test_the_start_waits_for_fixes_on_the_roads_while_a_drag_from_power_on_lasts(helsinki):
+    """A receiver dragged from power-on among the roads of central Helsinki (simulated issue-19
+    campaign drive 6553702082059704831 of master seed 2, consumer IMU, a 109 s drag): its fixes
+    pass the line test but never lie on the roads, so the start waits. Before, it gave the map
+    up after 120 s and started on the dragged fixes: 116 m RMS, 74 s off the route, error up
+    to 40σ."""
+    from selfnav import campaigns
+    from selfnav.sim.scenarios import simulate
+
+    spec, sim_seed, wins = campaigns.roadnav_scenario(6553702082059704831,
+                                                      dict(campaigns.ROADNAV_DEFAULTS))
+    drag = [w for w in wins if w.kind == "drag" and w.start == 0.0]
+    later = [w for w in wins if w.start > 0.0]
+    assert drag and later and spec["scenario"]["map"] == "helsinki_centre"
+    sim = simulate(spec, seed=sim_seed)
+    sol = selfnav.navigate(sim.imu, sim.gnss.as_gnss(), helsinki)
+    t, dp, *_ = errors(sol, sim.truth)
+    e = np.hypot(dp[:, 0], dp[:, 1])
+    assert t[0] > drag[0].end - 30.0, t[0]           # not started on the dragged fixes
+    before = t < later[0].start
+    assert before.any() and e[before].max() < 20.0, e[before].max()
+
+
+def test_the_start_gives_the_map_up_where_it_has_no_roads(karhula):
+    """Fixes far from every road of the map given (the Karhula map without its roads within
+    400 m of the drive: an extract with a hole where the car is): the map does not cover the
+    drive, and after ``give_up_s`` (120 s) the navigator starts without its check rather than
+    never (simulated campaign drive 6634116843481227035's route, its fixes clean)."""
+    from scipy.spatial import cKDTree
+
+    from selfnav import campaigns
+    from selfnav.sim.scenarios import simulate
+
+    params = dict(campaigns.ROADNAV_DEFAULTS, windows=0)
+    spec, sim_seed, _ = campaigns.roadnav_scenario(6634116843481227035, params)
+    assert spec["scenario"]["map"] == "kotka_karhula"
+    sim = simulate(spec, seed=sim_seed)
+    route = np.column_stack(karhula.to_local(sim.truth.lat, sim.truth.lon))
+    far, _ = cKDTree(route).query(karhula.xy)
+    holed = karhula.subgraph(np.flatnonzero(far > 400.0))
+    plain = selfnav.navigate(sim.imu, sim.gnss.as_gnss(), karhula)
+    sol = selfnav.navigate(sim.imu, sim.gnss.as_gnss(), holed)
+    t, dp, *_ = errors(sol, sim.truth)
+    assert t[0] < plain.trajectory.t[0] + 125.0, (t[0], plain.trajectory.t[0])
+    assert np.sqrt(np.mean(np.sum(dp[:, :2] ** 2, axis=1))) < 10.0
 
 
 def _earth_rate_n(f):
