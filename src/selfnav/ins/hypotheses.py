@@ -291,11 +291,11 @@ class FaultBank:
         it there, a drag their own tests and a consumer IMU's wide envelopes let through
         (simulated drive 7821150004149555261: 2 m/s, followed to 420 m at σ 5 m). The next
         fix's decision opens an episode, resetting ``M`` to the youngest mature reference or
-        witness that has parted from it (over the same seconds, :meth:`EkfRoadAid.track_evidence
-        <selfnav.roads.aid.EkfRoadAid.track_evidence>`) and whose track the map puts on its
-        roads at ``q ≤ e^−map_fixes_llr``, if one does; if none does, nothing is done (an
-        episode on the map's word alone, with ``M`` carrying the drag's velocity, took the
-        fixes back as healthy against it)."""
+        witness that has parted from it over the same seconds
+        (:meth:`~selfnav.roads.aid.EkfRoadAid.geodetic_track_evidence`) and whose track the map
+        puts on its roads at ``q ≤ e^−map_fixes_llr``, if one does; if none does, nothing is
+        done (an episode on the map's word alone, with ``M`` carrying the drag's velocity, took
+        the fixes back as healthy against it)."""
         ig = self.cfg.integrity
         self.flush()
         self.m_track = [p for p in self.m_track if p[0] >= t - ig.reinit_after_s - 1e-9] + \
@@ -319,12 +319,9 @@ class FaultBank:
         for ref in reversed(candidates):                # the youngest the map puts on them
             if len(ref.track) < 2:
                 continue
-            rt = np.array(ref.track)[:, 1:]
+            rt = np.array(ref.track)
             s_b = float(np.sqrt(np.linalg.eigvalsh(ref.flt.P[:2, :2])[-1]))
-            o = rt[0, 2:]
-            p_m = np.array([enu_offset(o[0], o[1], 0.0, a, b, 0.0)[:2] for a, b in rt[:, 2:]])
-            p_b = np.array([enu_offset(o[0], o[1], 0.0, a, b, 0.0)[:2] for a, b in rt[:, :2]])
-            ev = self.road_aid.track_evidence(o, p_m, p_b, s_m, s_b)
+            ev = self.road_aid.geodetic_track_evidence(rt[:, 3:], rt[:, 1:3], s_m, s_b)
             if ev is not None and ev[1] >= ig.map_fixes_llr:
                 self._map_alarm = (ref, f"{why} and the dead reckoning since {ref.t0:.1f} s on "
                                         f"them ({ev[1]:+.1f})")

@@ -128,14 +128,20 @@ def _off_roads(graph, t, xy, idx, radius):
     return ~on
 
 
-def _beyond_map(graph, xy, cover_m) -> bool:
-    """Do most of the points ``xy`` (local m) have no road at all within ``cover_m``?"""
+def _near_a_road(graph, xy, distance) -> np.ndarray:
+    """Has each point ``xy`` (local m) a road within ``distance`` m?"""
     import shapely
 
-    if len(xy) == 0:
-        return False
-    q, _ = graph.tree.query(shapely.points(xy), predicate="dwithin", distance=cover_m)
-    return len(np.unique(q)) < 0.5 * len(xy)
+    near = np.zeros(len(xy), bool)
+    if len(xy):
+        q, _ = graph.tree.query(shapely.points(xy), predicate="dwithin", distance=distance)
+        near[q] = True
+    return near
+
+
+def _beyond_map(graph, xy, cover_m) -> bool:
+    """Do most of the points ``xy`` (local m) have no road at all within ``cover_m``?"""
+    return len(xy) > 0 and _near_a_road(graph, xy, cover_m).sum() < 0.5 * len(xy)
 
 
 def _heading_of(C_nb):
@@ -289,10 +295,6 @@ class EkfRoadAid:
         p_ins = np.asarray(p_ins, float)
         if len(p_fix) < 2:
             return None
-        keep = thin_track(p_fix)
-        sep = float(np.median(np.hypot(*(p_fix[keep] - p_ins[keep]).T)))
-        if sep < max(self.evidence_min_m, 3.0 * math.hypot(sigma_fix, sigma_ins)):
-            return None
 
         def local(p):
             # the inverse of the ENU offsets the bank took (selfnav.earth.enu_offset)
@@ -300,22 +302,35 @@ class EkfRoadAid:
                                              np.column_stack([p, np.zeros(len(p))]))
             return np.column_stack(self.g.to_local(lat, lon))
 
-        return (on_roads_llr(self.g, local(p_fix[keep]), sigma_fix),
-                on_roads_llr(self.g, local(p_ins[keep]), sigma_ins))
+        return self._pair_evidence(local(p_fix), local(p_ins), sigma_fix, sigma_ins)
+
+    def geodetic_track_evidence(self, latlon_a, latlon_b, sigma_a, sigma_b):
+        """:meth:`track_evidence` of two tracks given as rows of (lat, lon) rad at the same
+        times, thinned along the first."""
+        if len(latlon_a) < 2:
+            return None
+        return self._pair_evidence(self._local(latlon_a), self._local(latlon_b), sigma_a, sigma_b)
+
+    def _local(self, latlon):
+        latlon = np.asarray(latlon, float)
+        return np.column_stack(self.g.to_local(latlon[:, 0], latlon[:, 1]))
+
+    def _pair_evidence(self, xy_a, xy_b, sigma_a, sigma_b):
+        keep = thin_track(xy_a)
+        sep = float(np.median(np.hypot(*(xy_a[keep] - xy_b[keep]).T)))
+        if sep < max(self.evidence_min_m, 3.0 * math.hypot(sigma_a, sigma_b)):
+            return None
+        return (on_roads_llr(self.g, xy_a[keep], sigma_a),
+                on_roads_llr(self.g, xy_b[keep], sigma_b))
 
     def track_off_roads(self, latlon, sigma):
         """The map's word on one track (``latlon``: rows of lat, lon rad), thinned as in
         :meth:`track_evidence`: its :func:`selfnav.roads.evidence.on_roads_llr` at ``sigma`` —
         or None when every point lies within its σ (and the road's own width) of some road,
         where the map cannot refute it (the cheap look first: the full one costs ~10 ms)."""
-        import shapely
-
-        latlon = np.asarray(latlon, float)
-        xy = np.column_stack(self.g.to_local(latlon[:, 0], latlon[:, 1]))
+        xy = self._local(latlon)
         xy = xy[thin_track(xy)]
-        near = math.hypot(sigma, SIGMA_ROAD_M)
-        q, _ = self.g.tree.query(shapely.points(xy), predicate="dwithin", distance=near)
-        if len(np.unique(q)) == len(xy):
+        if _near_a_road(self.g, xy, math.hypot(sigma, SIGMA_ROAD_M)).all():
             return None
         return on_roads_llr(self.g, xy, sigma)
 
