@@ -273,6 +273,35 @@ def test_a_healthy_run_is_rarely_found_inside_a_gauss_markov_window_and_always_o
     assert found_clean_first / trials > 0.95
 
 
+def test_the_healthy_run_ends_at_a_white_window_at_once_and_in_a_gauss_markov_one_soon():
+    """healthy_until, the end of the start's healthy run (the map check answers for the
+    fixes up to there): a white 200 m window breaks it at its first fix or the next, a Gauss–Markov one
+    (200 m, τ 60 s) within 15 fixes in 99 % of windows; clean 10 m fixes run on through 30
+    more fixes in ≥ 90 % (here 97 %; simulated)."""
+    from selfnav.ins.align import healthy_until
+    from selfnav.sensors import outlier_errors
+
+    rng = np.random.default_rng(7)
+    n, s, k0, w0 = 80, 10.0, 20, 40
+    t = np.arange(n, dtype=float)
+    car = np.column_stack([10.0 * t + 0.02 * t**2, 0.0 * t])
+    sig = np.full(n, s)
+    ran_on, gm_delay = 0, []
+    for _ in range(200):
+        white = rng.normal(size=(n, 2)) * s
+        clean_end = healthy_until(car + white, sig, k0, stop=w0)
+        ran_on += healthy_until(car + white, sig, k0, stop=k0 + 30) == k0 + 30
+        bad = car + white
+        bad[w0:] += rng.normal(size=(n - w0, 2)) * 200.0
+        assert healthy_until(bad, sig, k0) in ((clean_end,) if clean_end < w0 else (w0, w0 + 1))
+        gm = car + white
+        gm[w0:] += outlier_errors("gm", n - w0, 1.0, 200.0, 60.0, rng)
+        if clean_end == w0:
+            gm_delay.append(healthy_until(gm, sig, k0) - w0)
+    assert ran_on / 200 >= 0.90
+    assert min(gm_delay) >= 0 and np.percentile(gm_delay, 99) <= 15
+
+
 def test_a_pull_away_second_is_not_levelled_on_when_the_window_bounds_better():
     """Simulated campaign drive 3167802586923348212 (master seed 2, consumer IMU, 10 m fixes):
     the last "still" second before the start is the first of a 2 m/s² pull-away (its |f|

@@ -113,6 +113,33 @@ def test_corner_arc_is_the_circle_tangent_to_both_legs(helsinki):
     assert aid._arc(s, q, T1 - 15.0 * d1, R) is None
 
 
+def test_the_arc_takes_the_radius_of_its_own_corner_and_no_u_turn(helsinki):
+    """Two corners in a row are turned at their own radii: the arc of the second takes only
+    the radii measured while the heading lay between its legs (simulated drive
+    2784835463978362199: the first corner's 10 m placed the second's 2.6 m arc 6 m off). A
+    turn sharper than ``MAX_CORNER_TURN`` (a U-turn onto the road's reverse) has no arc."""
+    from selfnav.roads.aid import MAX_CORNER_TURN
+
+    g = helsinki
+    s, q = _corner(g)
+    aid = EkfRoadAid(g)
+    h0, h1 = float(g.seg_heading[s]), float(g.seg_heading[q])
+    th = float(wrap(h1 - h0))
+    before = [(h0 - np.sign(th) * np.radians(a), 10.0) for a in (50.0, 40.0, 30.0, 20.0)]
+    within = [(h0 + np.sign(th) * f * abs(th), 2.6) for f in (0.1, 0.3, 0.5, 0.7)]
+    aid.radii = before + within
+    assert np.allclose(aid._corner_radii((s, q)), 2.6)
+    aid.radii = before
+    assert len(aid._corner_radii((s, q))) == 0
+    # a U-turn: the reverse of the entry leg, if the map has it; else any leg turning > 150°
+    off, succ = successor_table(g)
+    pairs = [(a, b) for a in range(g.n_segments) for b in succ[off[a]:off[a + 1]]
+             if abs(float(wrap(g.seg_heading[b] - g.seg_heading[a]))) > MAX_CORNER_TURN]
+    assert pairs, "no U-turn on the map"
+    a, b = pairs[0]
+    assert aid._arc(a, b, g.xy[g.seg_v[a]] + 3.0, 10.0) is None
+
+
 def test_an_arc_the_filter_cannot_place_itself_on_takes_only_small_offsets(helsinki):
     """Where on the arc the car is the filter knows to its σ: with its 2σ beyond the arc's
     length (R·θ) an offset beyond the arc's own 2σ is as well explained by the car being
@@ -318,3 +345,28 @@ def test_start_waits_for_fixes_on_the_roads():
         g = read_roads(sim.map_path)
         assert robust_init(sim.imu, gd)["t"] < 60.0
         assert start_on_roads(sim.imu, gd, g)["t"] > 140.0
+
+
+def test_a_start_is_not_refused_for_an_outlier_window_after_it():
+    """Simulated (labelled): clean fixes for 30 s, then a white 200 m window to the end of
+    the record. The start's map check answers for its fixes only up to where their healthy
+    run ends — before, it took the window's fixes as its own and refused every start
+    (simulated campaign drive 3823853625665908027 never started). A slow car's course is
+    not tested against the roads (1705009503212533057: a fifth of its clean fixes)."""
+    from selfnav.roads.aid import _off_roads, start_on_roads
+    from selfnav.sim.scenarios import simulate
+
+    spec = {"scenario": {"kind": "car", "duration": 120.0, "map": "kotka_karhula"},
+            "imu": {"grade": "consumer"},
+            "gnss": {"outliers": [{"start": 30, "duration": 90, "kind": "white"}],
+                     "spike_rate": 0.0}}
+    sim = simulate(spec, seed=5)
+    gd = sim.gnss.as_gnss()
+    g = read_roads(sim.map_path)
+    init = start_on_roads(sim.imu, gd, g, complete=True)
+    assert init is not None and init["t"] < 30.0
+    # the clean fixes: at most the binomial test's nominal share far from their roads
+    x, y = g.to_local(gd.lat, gd.lon)
+    idx = np.flatnonzero(gd.t < 30.0)
+    far = _off_roads(g, gd.t, np.column_stack([x, y]), idx, np.full(len(gd.t), 10.0))
+    assert far.mean() <= 0.15

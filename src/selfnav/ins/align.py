@@ -711,6 +711,35 @@ def healthy_start(t, xy, sigma, window=20, each=True):
     return None
 
 
+def healthy_until(xy, sigma, k0, stop=None, window=20, since=0):
+    """Index of the first fix after ``k0`` (before ``stop``) where the run of healthy fixes
+    that holds ``k0`` and began at ``since`` ends (:func:`healthy_start`'s tests on the last
+    ``window`` second differences of the run's own fixes, and the bound on each), or ``stop``
+    (default ``len(xy)``) while it goes on.
+
+    A white 200 m window breaks it at its first fix, a Gauss–Markov one (36 m per second)
+    within a few on the RMS; a smooth drag does not (its second differences are a car's):
+    what a start's check of its fixes against the map must still answer for.
+    """
+    xy = np.asarray(xy, float)
+    n = len(xy) if stop is None else min(int(stop), len(xy))
+    if n < 3:
+        return n
+    xy = xy[:n]
+    d2 = np.hypot(*(xy[2:] - 2 * xy[1:-1] + xy[:-2]).T)     # d2[i] belongs to fix i + 2
+    s6 = np.sqrt(6.0) * np.asarray(sigma, float)[2:n]
+    for i in range(max(k0 + 1, since + 2, 2), n):
+        j = i - 2
+        seg = slice(max(since, j - window + 1), j + 1)      # (not the fixes before the run)
+        s6k = float(np.median(s6[seg]))
+        if d2[j] >= 4.0 * s6[j] or (
+                j + 1 - since >= window
+                and (np.median(d2[seg]) >= HEALTHY_MEDIAN_RATIO * RAYLEIGH_MEDIAN * s6k
+                     or np.mean(d2[seg] ** 2) >= 2.0 * (HEALTHY_RMS_RATIO * s6k) ** 2)):
+            return i
+    return n
+
+
 def fix_sigmas(gnss: GnssData, floor: float = 0.0, default: float = 10.0) -> np.ndarray:
     """The horizontal σ believed for each fix: the file's, ``default`` where it has none,
     never below ``floor`` (the filter's ``gnss.sigma_floor``)."""

@@ -14,7 +14,7 @@ import numpy as np
 
 from selfnav.earth import offset_to_geodetic
 from selfnav.errors import SelfnavError
-from selfnav.ins.align import robust_init
+from selfnav.ins.align import healthy_until, robust_init
 from selfnav.ins.config import CHI2_2_999, chi2_999
 from selfnav.ins.measurements import LevelRoad, RoadLine
 from selfnav.roads.corners import corner_candidates, line_intersection
@@ -23,8 +23,31 @@ from selfnav.roads.graph import RoadGraph
 from selfnav.roads.particles import TWO_PI, MatcherConfig, RoadParticles, wrap
 
 
+#: the share of clean fixes farther than 2 σ from every road running their way (the course
+#: tested within 3 of its own σ, :func:`_off_roads`): 2.8–10 % per drive, 5.8 % pooled
+#: (16 simulated Helsinki and Kotka drives, 3 900 clean fixes; the normal's 2σ tail alone
+#: is 4.6 %)
+P_FAR_NOMINAL = 0.06
+#: the start's check refuses its fixes at this false-alarm rate of that share: 6 of 40
+#: allowed, the 15 % share that had refused drags from power-on (7–15 of 40 far)
+ALPHA_START_CHECK = 0.01
+#: rad: the sharpest turn the map places a car by (a corner fix, an arc): beyond it the
+#: legs are near antiparallel — a U-turn on one road, a hairpin — and the lines through
+#: them meet, and a circle tangent to both lies, hundreds of metres away
+MAX_CORNER_TURN = math.radians(150.0)
+
+
+def far_allowed(n: int, p_far: float = P_FAR_NOMINAL, alpha: float = ALPHA_START_CHECK) -> int:
+    """How many of ``n`` clean fixes may lie far from the roads before the start's check
+    refuses them: the binomial ``(n, p_far)`` count exceeded with probability ≤ ``alpha``
+    (n = 12: 3, n = 20: 4, n = 40: 6)."""
+    from scipy.stats import binom
+
+    return int(binom.isf(alpha, n, p_far))
+
+
 def start_on_roads(imu, gnss, graph: RoadGraph, cfg=None, *, span=30.0, far_sigmas=2.0,
-                   max_far=0.15, sigma=10.0, complete: bool = False, give_up_s=120.0,
+                   sigma=10.0, complete: bool = False, give_up_s=120.0,
                    cover_m=250.0, start=None):
     """The navigator's start (:func:`selfnav.ins.align.robust_init`) checked against the map.
 
@@ -32,11 +55,14 @@ def start_on_roads(imu, gnss, graph: RoadGraph, cfg=None, *, span=30.0, far_sigm
     drifts smoothly from power-on passes that test (its second differences are small) and the
     in-motion alignment takes its drift rate for velocity — tens of degrees of heading at
     walking speed. The map sees it: the fixes from 10 s before the start to ``span`` s after
-    must lie on roads that run the way they move (the course of a line through the fixes
-    within ±4 s, where faster than 3 m/s, within 30° of the road's direction), at most
-    ``max_far`` of them farther than ``far_sigmas`` fix σ from every such road (a nominal fix:
-    about 5 %). If not, the start is tried again after that span (up to 20 times); with no
-    start that passes, the first one is kept.
+    (or to where their healthy run ends, :func:`selfnav.ins.align.healthy_until`: an outlier
+    window after a good start is not the start's to answer for — simulated drive
+    3823853625665908027, whose white window began 12 s after its start, never started) must
+    lie on roads that run the way they move (:func:`_off_roads`), no more of them farther
+    than ``far_sigmas`` fix σ from every such road than :func:`far_allowed` — a binomial
+    test at ``ALPHA_START_CHECK`` of the clean share ``P_FAR_NOMINAL``. If not, the start is
+    tried again after that span (up to 20 times); with no start that passes, the first one
+    is kept.
 
     ``complete`` (the causal navigator's start-up): only a start whose whole span lies in the
     data and that follows a healthy run of fixes counts; None until there is one — or, when
@@ -85,12 +111,21 @@ def start_on_roads(imu, gnss, graph: RoadGraph, cfg=None, *, span=30.0, far_sigm
         now_start = "start_kind" in init
         t_check = max(t0 - (span if now_start else 10.0), float(init.get("t_healthy", -np.inf)))
         t_end = float(gnss.t[-1]) if now_start else t0 + span
-        if complete and (t_end - t_check < span if now_start else gnss.t[-1] < t_end):
+        broken = False
+        if not now_start:
+            # the healthy run ends before t_end: the check answers for the fixes up to there
+            k0 = int(np.searchsorted(gnss.t, t0))
+            k1 = healthy_until(xy, sig, k0, stop=int(np.searchsorted(gnss.t, t_end, "right")),
+                               since=int(np.searchsorted(gnss.t, t_check)))
+            if k1 < len(gnss.t) and gnss.t[k1] <= t_end:
+                t_end, broken = float(gnss.t[k1]) - 1e-6, True
+        if complete and (t_end - t_check < span if now_start
+                         else not broken and gnss.t[-1] < t_end):
             break
         last = init
         idx = np.flatnonzero((gnss.t >= t_check) & (gnss.t <= t_end))
-        if len(idx) < 5 or np.mean(_off_roads(graph, gnss.t, xy, idx, far_sigmas * sig)) \
-                <= max_far:
+        if len(idx) < 5 or np.count_nonzero(_off_roads(graph, gnss.t, xy, idx, sig, far_sigmas)) \
+                <= far_allowed(len(idx)):
             return init
         if now_start:
             break            # the next one is tried at the next attempt, on newer fixes
@@ -106,23 +141,35 @@ def start_on_roads(imu, gnss, graph: RoadGraph, cfg=None, *, span=30.0, far_sigm
     return first if first is not None else robust_init(imu, gnss, cfg=cfg)
 
 
-def _off_roads(graph, t, xy, idx, radius):
-    """For fixes ``idx``: is no road running their way within ``radius`` (see
-    :func:`start_on_roads`)?"""
+def _off_roads(graph, t, xy, idx, sigma, far_sigmas=2.0):
+    """For fixes ``idx`` (σ ``sigma`` each, m): is no road running their way within
+    ``far_sigmas`` σ (see :func:`start_on_roads`)?
+
+    The way a fix runs is the course of a line through the fixes within ±4 s (where faster
+    than 3 m/s); it must lie within 30° of the road's direction, or within 3 of the course's
+    own σ (the line's velocity σ over its speed: 18° at 4 m/s on 10 m fixes) where that is
+    wider: a 30° test on a slow car's course put a fifth of the clean fixes of a simulated
+    drive off the roads (1705009503212533057: 4 of its 12 fixes between an outage and an
+    outlier window, 7 of 41 later; it never started), while a drag's fixes run 48° off
+    their road at 6 m/s (4922493927024925402)."""
     import shapely
 
     course = np.full(len(idx), np.nan)
+    gate = np.full(len(idx), np.radians(30.0))
     for j, k in enumerate(idx):
         m = np.abs(t - t[k]) <= 4.0
         if m.sum() >= 5:
             tt = t[m] - t[k]
             v = np.polyfit(tt, xy[m], 1)[0]
-            if np.hypot(*v) > 3.0:
+            speed = float(np.hypot(*v))
+            s_course = float(sigma[k]) / math.sqrt(float(np.sum((tt - tt.mean()) ** 2))) \
+                / max(speed, 1e-9)
+            if speed > 3.0:
                 course[j] = np.arctan2(v[0], v[1])
+                gate[j] = max(gate[j], 3.0 * s_course)
     q, si = graph.tree.query(shapely.points(xy[idx]), predicate="dwithin",
-                             distance=radius[idx])
-    ok = np.isnan(course[q]) | (np.abs(wrap(graph.seg_heading[si] - course[q]))
-                                < np.radians(30.0))
+                             distance=far_sigmas * np.asarray(sigma, float)[idx])
+    ok = np.isnan(course[q]) | (np.abs(wrap(graph.seg_heading[si] - course[q])) < gate[q])
     on = np.zeros(len(idx), bool)
     on[q[ok]] = True
     return ~on
@@ -246,7 +293,7 @@ class EkfRoadAid:
         self.t_constraint = -np.inf
         self.hdg_last = None
         self.rates = []        # recent (t, yaw rate)
-        self.radii = []        # v/ω of the current turn
+        self.radii = []        # (heading, v/ω) of the current turn
         self.seg_prev = -1     # the estimate's previous segment (the leg before a vertex)
         self.seg_cur = -1
         self.history = []      # (t, x, y, seg, spread, line share)
@@ -475,14 +522,34 @@ class EkfRoadAid:
                 return int(q), int(s)
         return None
 
+    def _corner_radii(self, legs) -> np.ndarray:
+        """The radii ``v/ω`` of the current turn measured within the corner ``legs``: while
+        the heading lay between the two legs' (10° margin). A turn through two corners in a
+        row turns at each corner's own radius (simulated campaign drive
+        2784835463978362199: 10 m through a 53° corner, then 2.6 m through the 122° one
+        after it; the first's radius placed the second's arc 6 m off, taken at σ 1 m)."""
+        if not self.radii:
+            return np.zeros(0)
+        h, r = np.asarray(self.radii, float).T
+        h0, h1 = (float(self.g.seg_heading[q]) for q in legs)
+        th = float(wrap(h1 - h0))
+        pos = wrap(h - h0) * np.sign(th)
+        margin = np.radians(10.0)
+        return r[(pos >= -margin) & (pos <= abs(th) + margin)]
+
     def _arc(self, s_in, s_out, p, R):
         """Circle tangent to both legs with radius ``R``: ``(normal, offset)`` of ``p`` or
-        None when ``p`` is not beside the arc."""
+        None when ``p`` is not beside the arc, or the legs turn by more than ``MAX_CORNER_TURN``."""
         g = self.g
         V = g.xy[g.seg_v[s_in]]
         _, d1, _ = self._line(s_in)
         _, d2, _ = self._line(s_out)
         th = float(wrap(g.seg_heading[s_out] - g.seg_heading[s_in]))
+        if abs(th) > MAX_CORNER_TURN:
+            # a U-turn (the reverse of the road is a successor): no circle tangent to both
+            # legs lies near the car (simulated campaign drive 2784835463978362199: a 179°
+            # turn at 2.6 m/s, its arc's normal taken at σ 1 m — 3.3 → 1.4 m σ, 6 m off)
+            return None
         b = d2 - d1
         b /= np.linalg.norm(b)
         C = V + b * R / np.cos(th / 2.0)
@@ -549,7 +616,7 @@ class EkfRoadAid:
         w_rate = float(np.mean([r[1] for r in self.rates]))          # over the last 0.6 s
         turning = abs(w_rate) > np.radians(3.0)
         if turning and speed > 1.0 and abs(rate) > np.radians(1.0):
-            self.radii.append(speed / abs(rate))
+            self.radii.append((hdg, speed / abs(rate)))
         elif not turning:
             self.radii = []
         corner = self._corner_fix(t, flt, p_ins, hdg, turning, speed)
@@ -621,7 +688,7 @@ class EkfRoadAid:
                 out = {"normal_n": nrm, "offset": float((p_ins - a0) @ nrm), "kind": "leg",
                        "heading": float(self.g.seg_heading[q])}
         elif legs is not None:
-            rr = np.asarray(self.radii[2:])          # the first 0.4 s is the turn's entry
+            rr = self._corner_radii(legs)[2:]          # the first 0.4 s is the turn's entry
             if len(rr) >= 3 and np.subtract(*np.percentile(rr, [75, 25])) < 0.3 * np.median(rr):
                 R = float(np.median(rr))
                 arc = self._arc(*legs, p_ins, R)
@@ -723,7 +790,7 @@ class EkfRoadAid:
             return None
         _, h0, p0 = before[-1]
         th = float(wrap(hdg - h0))
-        if not np.radians(35.0) <= abs(th) <= np.radians(150.0):
+        if not np.radians(35.0) <= abs(th) <= MAX_CORNER_TURN:
             return None
         x = line_intersection(p0, h0, p_ins, hdg)
         if x is None or x[1] < -10.0 or x[2] > 10.0:
