@@ -48,7 +48,10 @@ def test_distribution_summary_by_hand():
 @pytest.mark.slow
 def test_one_drive_through_the_pipeline():
     """150 s on Helsinki with one white window: the row has the metrics of evaluate --map and
-    the time off the route, and the campaign's summary extends the generic one."""
+    the time off the route, and the campaign's summary extends the generic one. (Since stop
+    50 the start is made before the window — the map check answers only for its own healthy
+    fixes — and a consumer start a few seconds old dead-reckons its 37 s: 8 m across, 22 m
+    along, at an honest σ; before, the navigator waited the window out.)"""
     from selfnav.montecarlo import run_montecarlo
 
     params = {"duration_s": 150.0, "windows": 1, "window_min_s": 30.0, "window_max_s": 40.0,
@@ -57,7 +60,8 @@ def test_one_drive_through_the_pipeline():
     r = run_montecarlo("roadnav", 1, seed=5, params=params, workers=0)
     row = {k: v[0] for k, v in r.table.items()}
     assert row["map"] == "helsinki_centre" and row["windows"].endswith("white")
-    assert 0.0 <= row["cross_rms_m"] < 5.0 and 0.0 <= row["along_rms_m"] < 30.0
+    assert 0.0 <= row["cross_rms_m"] < 10.0 and 0.0 <= row["along_rms_m"] < 30.0
+    assert row["err_sigma_p95"] <= 3.0
     assert 0.0 <= row["off_route_s"] <= 150.0 and 0.0 < row["on_route"] <= 1.0
     assert row["sigma"] > 0 and row["error"] == row["horizontal_rms_m"]
     assert r.summary["along_rms_m"]["max"] == row["along_rms_m"]
