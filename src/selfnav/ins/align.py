@@ -684,6 +684,22 @@ HEALTHY_MEDIAN_RATIO = 1.6
 HEALTHY_RMS_RATIO = 1.4
 
 
+def _second_differences(xy, sigma):
+    """Lengths of the second differences ``z_k − 2 z_{k−1} + z_{k−2}`` of the positions ``xy``
+    (element ``i`` belongs to fix ``i + 2``) and their nominal per-axis σ, ``√6 σ``."""
+    xy = np.asarray(xy, float)
+    d2 = np.hypot(*(xy[2:] - 2 * xy[1:-1] + xy[:-2]).T)
+    return d2, np.sqrt(6.0) * np.asarray(sigma, float)[2:len(xy)]
+
+
+def _window_healthy(d2, s6) -> bool:
+    """The median and RMS tests of :func:`healthy_start` on one window of second differences
+    ``d2`` (nominal per-axis σ ``s6``; their median stands for the window's)."""
+    s6k = float(np.median(s6))
+    return bool(np.median(d2) < HEALTHY_MEDIAN_RATIO * RAYLEIGH_MEDIAN * s6k
+                and np.mean(d2 ** 2) < 2.0 * (HEALTHY_RMS_RATIO * s6k) ** 2)
+
+
 def healthy_start(t, xy, sigma, window=20, each=True):
     """Index of the first fix of a run of ``window`` fixes that look healthy without an INS.
 
@@ -695,18 +711,14 @@ def healthy_start(t, xy, sigma, window=20, each=True):
     None when no such run exists. ``t`` must be ~regular. ``each=False`` drops the bound on
     each difference (one 50 m spike among 10 m fixes exceeds it, not the median or the RMS).
     """
-    xy = np.asarray(xy, float)
     n = len(xy)
     if n < window + 2:
         return None
-    d2 = np.hypot(*(xy[2:] - 2 * xy[1:-1] + xy[:-2]).T)     # d2[i] belongs to fix i + 2
-    s6 = np.sqrt(6.0) * np.asarray(sigma, float)[2:]
+    d2, s6 = _second_differences(xy, sigma)
     ok_each = d2 < 4.0 * s6 if each else np.ones(len(d2), bool)
     for k in range(0, n - 2 - window + 1):
         seg = slice(k, k + window)
-        s6k = float(np.median(s6[seg]))
-        if (ok_each[seg].all() and np.median(d2[seg]) < HEALTHY_MEDIAN_RATIO * RAYLEIGH_MEDIAN * s6k
-                and np.mean(d2[seg] ** 2) < 2.0 * (HEALTHY_RMS_RATIO * s6k) ** 2):
+        if ok_each[seg].all() and _window_healthy(d2[seg], s6[seg]):
             return k     # fixes k .. k + window + 1 are healthy
     return None
 
@@ -721,21 +733,15 @@ def healthy_until(xy, sigma, k0, stop=None, window=20, since=0):
     within a few on the RMS; a smooth drag does not (its second differences are a car's):
     what a start's check of its fixes against the map must still answer for.
     """
-    xy = np.asarray(xy, float)
     n = len(xy) if stop is None else min(int(stop), len(xy))
     if n < 3:
         return n
-    xy = xy[:n]
-    d2 = np.hypot(*(xy[2:] - 2 * xy[1:-1] + xy[:-2]).T)     # d2[i] belongs to fix i + 2
-    s6 = np.sqrt(6.0) * np.asarray(sigma, float)[2:n]
+    d2, s6 = _second_differences(np.asarray(xy, float)[:n], sigma)
     for i in range(max(k0 + 1, since + 2, 2), n):
-        j = i - 2
+        j = i - 2                                          # d2[j] belongs to fix i
         seg = slice(max(since, j - window + 1), j + 1)      # (not the fixes before the run)
-        s6k = float(np.median(s6[seg]))
-        if d2[j] >= 4.0 * s6[j] or (
-                j + 1 - since >= window
-                and (np.median(d2[seg]) >= HEALTHY_MEDIAN_RATIO * RAYLEIGH_MEDIAN * s6k
-                     or np.mean(d2[seg] ** 2) >= 2.0 * (HEALTHY_RMS_RATIO * s6k) ** 2)):
+        if d2[j] >= 4.0 * s6[j] or (j + 1 - since >= window
+                                    and not _window_healthy(d2[seg], s6[seg])):
             return i
     return n
 

@@ -163,10 +163,10 @@ def _off_roads(graph, t, xy, idx, sigma, far_sigmas=2.0):
             tt = t[m] - t[k]
             v = np.polyfit(tt, xy[m], 1)[0]
             speed = float(np.hypot(*v))
-            s_course = float(sigma[k]) / math.sqrt(float(np.sum((tt - tt.mean()) ** 2))) \
-                / max(speed, 1e-9)
             if speed > 3.0:
                 course[j] = np.arctan2(v[0], v[1])
+                s_course = float(sigma[k]) / math.sqrt(float(np.sum((tt - tt.mean()) ** 2))) \
+                    / speed
                 gate[j] = max(gate[j], 3.0 * s_course)
     q, si = graph.tree.query(shapely.points(xy[idx]), predicate="dwithin",
                              distance=far_sigmas * np.asarray(sigma, float)[idx])
@@ -547,9 +547,8 @@ class EkfRoadAid:
         _, d2, _ = self._line(s_out)
         th = float(wrap(g.seg_heading[s_out] - g.seg_heading[s_in]))
         if abs(th) > MAX_CORNER_TURN:
-            # a U-turn (the reverse of the road is a successor): no circle tangent to both
-            # legs lies near the car (simulated campaign drive 2784835463978362199: a 179°
-            # turn at 2.6 m/s, its arc's normal taken at σ 1 m — 3.3 → 1.4 m σ, 6 m off)
+            # a U-turn (the reverse of the road is a successor): the centre lies R/cos(θ/2)
+            # from the vertex — 115 R at 179° — no circle tangent to both legs is near the car
             return None
         b = d2 - d1
         b /= np.linalg.norm(b)
