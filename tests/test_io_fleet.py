@@ -41,8 +41,8 @@ def test_fleet_csv_merges_orders_groups_and_keeps_the_time_text(tmp_path):
     p = _write(tmp_path / "fleet.csv", "\n".join([
         "# logger export",
         "trip_id;timestamp;latitude;longitude;alt",
-        "a;2019-03-11T08:33:24+00:00;60.10;26.90;10",
-        "a;2019-03-11T08:33:24+00:00;60.30;26.70;20",     # same second: merged (mean)
+        "a;2019-03-11T08:33:24+00:00;60.2001;26.7999;10",
+        "a;2019-03-11T08:33:24+00:00;60.1999;26.8001;20",   # same second, 16 m: merged (mean)
         "b;2019-03-11T08:33:20+00:00;60.17;24.94;1",
         "a;2019-03-11T08:33:20+00:00;60.00;27.00;5",      # out of order: ordered
         "b;2019-03-11T08:33:29+00:00;60.17;24.95;1",
@@ -54,13 +54,31 @@ def test_fleet_csv_merges_orders_groups_and_keeps_the_time_text(tmp_path):
     assert a.t_text == ["2019-03-11T08:33:20+00:00", "2019-03-11T08:33:24+00:00",
                         "2019-03-11T08:33:24+00:00"]
     assert a.lines.tolist() == [6, 3, 4] and a.row_fix.tolist() == [0, 1, 1]
-    np.testing.assert_allclose(np.degrees(a.gnss.lat), [60.0, 60.2])
-    np.testing.assert_allclose(np.degrees(a.gnss.lon), [27.0, 26.8])
+    np.testing.assert_allclose(np.degrees(a.gnss.lat), [60.0, 60.2], rtol=0, atol=1e-9)
+    np.testing.assert_allclose(np.degrees(a.gnss.lon), [27.0, 26.8], rtol=0, atol=1e-9)
     np.testing.assert_allclose(np.diff(a.gnss.t), [4.0])
     assert any("'trip_id' as track_id" in n and "'latitude' as lat_deg" in n for n in notes)
     assert any("1 repeated time stamps merged" in n for n in notes)
     assert any("out of time order in 1 tracks" in n for n in notes)
     assert all("\n" not in n for n in notes)
+
+
+def test_repeated_stamps_that_disagree_keep_the_fix_nearest_its_neighbours(tmp_path):
+    """A good fix and a multipath one 120 m off in the same second: their mean would lie 60 m
+    off both; the reader keeps the one on the line of the fixes around it (issue 21)."""
+    rows = ["track_id,t,lat_deg,lon_deg,h_m"]
+    for k in range(5):                                  # 10 m/s north
+        rows.append(f"c,{k},{60.0 + k * 10 / 111_195:.8f},25.0,{k}")
+    rows.insert(3, f"c,2,{60.0 + 20 / 111_195:.8f},{25.0 + 120 / 55_600:.8f},9")  # multipath
+    rows.insert(3, f"c,2,{60.0 + 20 / 111_195:.8f},25.0,7")   # ... and a second good one
+    p = _write(tmp_path / "f.csv", "\n".join(rows) + "\n")
+    fleet, notes = _notes(lambda: read_fleet(p))
+    c = fleet.tracks[0]
+    assert len(c.gnss) == 5 and c.row_fix.tolist() == [0, 1, 2, 2, 2, 3, 4]
+    # two of three agree: the median is theirs, the fix nearest the neighbours is kept
+    assert np.degrees(c.gnss.lon[2]) == pytest.approx(25.0, abs=1e-9)
+    assert c.gnss.h[2] in (2.0, 7.0)
+    assert any("disagreed by more than 20 m" in n for n in notes)
 
 
 def test_bad_rows_and_short_tracks_are_named_and_the_others_kept(tmp_path):
@@ -116,11 +134,11 @@ def test_native_gnss_csv_takes_iso_times_repeats_and_unsorted_rows(tmp_path):
     p = _write(tmp_path / "g.csv", "t,lat_deg,lon_deg,h_m\n"
                "2019-03-11T08:00:02Z,60.0,26.0,10\n"
                "2019-03-11T08:00:00Z,60.1,26.1,10\n"
-               "2019-03-11T08:00:01Z,60.2,26.2,10\n"
-               "2019-03-11T08:00:01Z,60.4,26.4,30\n")
+               "2019-03-11T08:00:01Z,60.05,26.05,10\n"
+               "2019-03-11T08:00:01Z,60.05001,26.05,30\n")
     g, notes = _notes(lambda: read_gnss_csv(p))
     np.testing.assert_allclose(g.t - g.t[0], [0.0, 1.0, 2.0])
-    np.testing.assert_allclose(np.degrees(g.lat), [60.1, 60.3, 60.0])
+    np.testing.assert_allclose(np.degrees(g.lat), [60.1, 60.050005, 60.0])
     np.testing.assert_allclose(g.h, [10.0, 20.0, 10.0])
     assert len(notes) == 2 and any("1 repeated" in n for n in notes)
     bad = _write(tmp_path / "b.csv", "t,lat_deg,lon_deg,h_m\n0,60,26,1\n1,x,26,1\n")

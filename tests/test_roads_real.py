@@ -293,3 +293,20 @@ def test_a_crawling_car_keeps_its_progress_along_the_road(full):
     r = HmmMatcher(g, sigma=3.0).match(np.arange(12) * 5.0, xy)
     err = np.hypot(*(r.xy - true).T)
     assert np.sqrt(np.mean(err ** 2)) < 3.0 and np.ptp(r.along) > 40.0, (err, r.along)
+
+
+def test_a_standing_car_outweighs_one_multipath_fix_before_it():
+    """Track car0114 of the Helsinki real-like fleet, seed 3 (simulated): a 2.4 m fix 108 m off
+    (multipath), then three fixes of the car standing where it is. As one epoch each, the
+    outlier and the standing car were equally likely to be the track's outlier, and all four
+    fixes were put 100 m off by the outlier. A standing car's epoch is an outlier only if all
+    its fixes are: the car is matched where it stands, the outlier on its way in, unflagged."""
+    g = read_match_roads(packaged_map("helsinki_centre"))
+    xy = np.array([[-264.8, -162.5], [-334.8, -86.4], [-337.6, -87.9], [-337.0, -86.1]])
+    car = np.array([-339.1, -83.4])
+    t = np.array([0.0, 9.0, 16.0, 25.0])
+    for sigma in (2.4, 4.0):
+        r = HmmMatcher(g, sigma=sigma).match(t, xy)
+        off = np.hypot(*(r.xy - car).T)
+        assert np.all(off[1:] < 3.0) and off[0] < 20.0, (sigma, off)
+        assert not r.matched[0] and r.matched[1:].all()

@@ -9,7 +9,8 @@ accepted as it comes:
 * ``t``: seconds, epoch milliseconds, or ISO-8601 date-times with or without a zone
   (``2019-03-11T08:33:24+00:00``); the output keeps the input's text;
 * repeated time stamps in a track (two positions in the same second) are merged into one fix
-  (positions averaged), rows out of time order are ordered, a track's rows may be spread over
+  (positions averaged; positions that disagree by more than :data:`REPEAT_AGREE_M` -- a
+  multipath fix beside a good one -- give the one nearest the neighbouring fixes), rows out of time order are ordered, a track's rows may be spread over
   the file; each of these gives one line (a :class:`~selfnav.errors.SelfnavWarning`) with the
   count;
 * a bad row (a value that is not a number, a latitude beyond ±90°) is skipped with one line
@@ -323,18 +324,57 @@ def _row_values(path, cols, lines, *, strict):
     return vals, form, ok, reasons
 
 
+#: Positions in the same second farther than this apart (m; or 5 times their ``sigma_m``) do not
+#: both hold: the one nearest its neighbouring fixes is kept instead of their mean.
+REPEAT_AGREE_M = 20.0
+
+
 def _merge_repeated(t, cols):
-    """Fixes with the same time stamp averaged: ``(t_unique, {col: mean}, row -> fix)``."""
+    """Fixes with the same time stamp merged: ``(t_unique, {col: value}, row -> fix, chosen)``.
+
+    Positions that agree (within :data:`REPEAT_AGREE_M`, or 5 ``sigma_m``, of their median) are
+    averaged; where they do not -- a good fix and a multipath one logged in the same second,
+    whose mean would lie tens of metres off both --, the row nearest the midpoint of the
+    neighbouring fixes (the one neighbour at a track's end) is kept. ``chosen`` counts those."""
     tu, inv = np.unique(t, return_inverse=True)
     if len(tu) == len(t):
-        return tu, dict(cols), inv
+        return tu, dict(cols), inv, 0
     out = {}
     for c, v in cols.items():           # unknown values (NaN) left out of the mean
         ok = np.isfinite(v)
         cnt = np.bincount(inv[ok], minlength=len(tu))
         s = np.bincount(inv[ok], weights=v[ok], minlength=len(tu))
         out[c] = np.where(cnt > 0, s / np.maximum(cnt, 1), np.nan)
-    return tu, out, inv
+    if "lat_deg" not in cols or "lon_deg" not in cols or len(tu) < 2:
+        return tu, out, inv, 0
+    lat, lon = np.asarray(cols["lat_deg"], float), np.asarray(cols["lon_deg"], float)
+    k_lon = np.cos(np.radians(np.nanmedian(lat)))
+    m_deg = 111_195.0                   # metres per degree of a great circle
+    sig = np.asarray(cols.get("sigma_m", np.full(len(t), np.nan)), float)
+    chosen = 0
+    for j in np.flatnonzero(np.bincount(inv) > 1):
+        rows = np.flatnonzero(inv == j)
+        x, y = lon[rows] * k_lon * m_deg, lat[rows] * m_deg
+        mx, my = np.median(x), np.median(y)
+        agree = max(REPEAT_AGREE_M, 5 * np.nan_to_num(np.nanmax(sig[rows]), nan=0.0)) \
+            if np.isfinite(sig[rows]).any() else REPEAT_AGREE_M
+        if not np.all(np.hypot(x - mx, y - my) <= agree):
+            nb = [k for k in (j - 1, j + 1) if 0 <= k < len(tu)]
+            nx = np.mean([out["lon_deg"][k] for k in nb]) * k_lon * m_deg
+            ny = np.mean([out["lat_deg"][k] for k in nb]) * m_deg
+            keep = rows[np.argmin(np.hypot(x - nx, y - ny))]
+            for c, v in cols.items():
+                out[c][j] = v[keep]
+            chosen += 1
+    return tu, out, inv, chosen
+
+
+def merged_note(counts) -> str:
+    """The words for the repeated stamps of ``counts`` (as :func:`build_tracks` returns)."""
+    chosen = (f"; at {counts['chosen']} the positions disagreed by more than "
+              f"{REPEAT_AGREE_M:.0f} m and the one nearest its neighbours was kept"
+              if counts.get("chosen") else "")
+    return f"{counts['merged']} repeated time stamps merged (positions averaged{chosen})"
 
 
 def to_wgs84(lat, lon, h, datum, path=None):
@@ -363,7 +403,7 @@ def build_tracks(path, cols, lines, *, datum="wgs84", strict=False, default_id=N
         groups = [(default_id or Path(path).stem, np.arange(n))]
     tracks = []
     counts = {"merged": 0, "reordered": 0, "skipped": 0, "tracks_merged": 0,
-              "tracks_reordered": 0}
+              "tracks_reordered": 0, "chosen": 0}
     skipped_notes = []
     for tid, rows in groups:
         bad = rows[~ok[rows]]
@@ -383,10 +423,11 @@ def build_tracks(path, cols, lines, *, datum="wgs84", strict=False, default_id=N
         rows, t = rows[o], t[o]
         num = {c: vals[c][rows] for c in ("lat_deg", "lon_deg", "h_m", "sigma_m", "ve", "vn",
                                           "vu") if c in vals}
-        tu, merged, inv = _merge_repeated(t, num)
+        tu, merged, inv, chosen = _merge_repeated(t, num)
         if len(tu) < len(t):
             counts["merged"] += len(t) - len(tu)
             counts["tracks_merged"] += 1
+            counts["chosen"] += chosen
         h_rows = num.get("h_m", np.full(len(rows), np.nan))
         t_text = [cols["t"][k] for k in rows]
         error = None
@@ -452,7 +493,8 @@ def read_fleet(paths, *, datum: str = "wgs84") -> Fleet:
     """
     fleet = Fleet()
     forms = set()
-    total = {"merged": 0, "reordered": 0, "tracks_merged": 0, "tracks_reordered": 0}
+    total = {"merged": 0, "reordered": 0, "tracks_merged": 0, "tracks_reordered": 0,
+             "chosen": 0}
     for f in fleet_files(paths):
         cols, lines = read_columns(f, ("t", "lat_deg", "lon_deg"),
                                    ("h_m", "sigma_m", "track_id"))
@@ -466,8 +508,7 @@ def read_fleet(paths, *, datum: str = "wgs84") -> Fleet:
     fleet.time_form = "iso" if forms == {"iso"} else ("seconds" if "iso" not in forms else
                                                          "mixed")
     if total["merged"]:
-        _note(f"{total['merged']} repeated time stamps merged (positions averaged) in "
-              f"{total['tracks_merged']} tracks")
+        _note(f"{merged_note(total)} in {total['tracks_merged']} tracks")
     if total["reordered"]:
         _note(f"rows out of time order in {total['tracks_reordered']} tracks ordered by time "
               f"({total['reordered']} steps back)")

@@ -11,7 +11,8 @@ import numpy as np
 
 from selfnav.errors import InputError, SelfnavWarning
 from selfnav.io.csvio import open_text
-from selfnav.io.fleet import build_tracks, read_columns, to_wgs84  # noqa: F401 (re-exported)
+from selfnav.io.fleet import (build_tracks, merged_note, read_columns,  # noqa: F401
+                              to_wgs84)
 from selfnav.types import GnssData
 
 #: GPS time origin 1980-01-06 in Unix-like seconds; GPS week seconds are counted from a Sunday.
@@ -45,8 +46,7 @@ def read_gnss_csv(path, datum: str = "wgs84") -> GnssData:
         warnings.warn(f"{path}: rows out of time order ordered by time ({counts['reordered']} "
                       "steps back)", SelfnavWarning, stacklevel=2)
     if counts["merged"]:
-        warnings.warn(f"{path}: {counts['merged']} repeated time stamps merged (positions "
-                      "averaged)", SelfnavWarning, stacklevel=2)
+        warnings.warn(f"{path}: {merged_note(counts)}", SelfnavWarning, stacklevel=2)
     return tr.gnss
 
 

@@ -206,6 +206,7 @@ class _Epochs:
     bounds: np.ndarray     # epochs of each track: starts and the total
     first: np.ndarray      # (E,) first fix of each epoch
     outlier: np.ndarray    # (N,) the fix is an outlier of its run (not in its mean)
+    count: np.ndarray      # (E,) fixes in each epoch's mean (its outliers left out)
 
 
 class HmmMatcher:
@@ -442,7 +443,7 @@ class HmmMatcher:
         starts = np.asarray(bounds[:-1])
         eb = np.concatenate([run[starts[starts < n]], [len(first)]]).astype(np.int64)
         return _Epochs(run, exy, np.bincount(run, sig) / cnt if n else sig, ts[first],
-                       ts[last], eb, first, out)
+                       ts[last], eb, first, out, np.bincount(run, w) if n else cnt)
 
     def _gaps(self, ep: _Epochs):
         """Time from each epoch to the next (inf across tracks) and where only a break is
@@ -527,7 +528,7 @@ class HmmMatcher:
         q = neighbour_points(exy, ep.bounds, radius)
         off, seg, along, dist, foot, pos = self._candidates(exy, radius, q)
         query = np.repeat(np.arange(n), np.diff(off))
-        em = self.emission(dist, sig[query])
+        em = self.emission(dist, sig[query], ep.count[query])
         dt, forced = self._gaps(ep)
         fastest = self.max_speed * np.minimum(dt, self.max_gap) + \
             2 * np.maximum(radius[1:], radius[:-1])
@@ -599,14 +600,20 @@ class HmmMatcher:
             np.concatenate([np.repeat(lim_w, np.diff(off[a:b + 1])),
                             np.repeat(backtrack[a + 1:b + 1], np.diff(off[a + 1:b + 2]))]))
 
-    def emission(self, dist, sigma):
+    def emission(self, dist, sigma, count=1.0):
         """Log emission of candidates at ``dist`` m from their fix of σ ``sigma`` m: Gaussian,
         with a share ``outlier_p`` of fixes from a wide Gaussian of σ ``outlier_sigma`` (multipath:
         a fix tens of metres off costs a bounded amount, so one bad fix does not pull the match
-        onto whatever road lies under it)."""
+        onto whatever road lies under it).
+
+        An epoch that is the mean of ``count`` fixes of a standing car, each within 3 σ of the
+        others, is an outlier only if all of them are: its wide share is ``outlier_p ** count``
+        (else a lone multipath fix and a run of good ones beside it are equally likely to be
+        the track's outlier)."""
         so = np.maximum(self.outlier_sigma, 3 * sigma)
-        return np.logaddexp(np.log1p(-self.outlier_p) - 0.5 * (dist / sigma) ** 2,
-                            np.log(self.outlier_p) + np.log(sigma / so) - 0.5 * (dist / so) ** 2)
+        p = self.outlier_p ** np.maximum(count, 1.0)
+        return np.logaddexp(np.log1p(-p) - 0.5 * (dist / sigma) ** 2,
+                            np.log(p) + np.log(sigma / so) - 0.5 * (dist / so) ** 2)
 
     def match_geodetic(self, t, lat, lon, sigma=None) -> MatchResult:
         """Match fixes given as WGS-84 latitude and longitude (rad)."""
