@@ -101,7 +101,7 @@ ERROR_CORR_MAX = 0.9
 #: Calibration of ``match_p`` (:mod:`selfnav.roads.posterior`): ``a``, ``b`` of the logistic map
 #: of the posterior's log odds, fitted on the tuning fleets (benchmarks/bench_mapmatch.py
 #: ``calibrate``: seed 1, both noise bands).
-MATCH_P_AB = (0.416, 2.716)
+MATCH_P_AB = (0.353, 2.720)
 
 
 @dataclass
