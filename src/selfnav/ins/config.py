@@ -330,7 +330,12 @@ class VehicleConstraints:
     zupt_speed_cap : … and below this, m/s (a constant cruise is still to an IMU: a 5.7 m/s
         cruise whose INS speed sat within 2σ of zero right after a start was clamped to rest)
     zupt_brake_accel : the mean forward acceleration over the 2 s before a still run that
-        makes it a braking to rest, m/s² (below minus this)
+        makes it a braking to rest, m/s² (below minus this) …
+    zupt_brake_last_s : … and over the last this many seconds before it, for the widened
+        speed bound of the zero-velocity update (a braking to rest lasts until the car stands)
+    zupt_sigma_max : otherwise the zero-velocity update needs the INS's horizontal speed σ
+        within this, m/s (None: any; a car's: 1 — an INS that does not know its speed to
+        within ``zupt_speed`` does not know it is slow)
     grade_sigma : a level-road prior once a second, ``v_U = 0`` within ``grade_sigma·|v| +
         0.1`` m/s (a car's: 0.08, ordinary grades; None: off; the road aid gives its own
         with ``--map``): the pitch error a consumer gyro bias drives after a start in motion
@@ -396,6 +401,8 @@ class VehicleConstraints:
     zupt_speed_sigmas: float = 0.0
     zupt_speed_cap: float = 3.0
     zupt_brake_accel: float = 0.3
+    zupt_brake_last_s: float = 0.4
+    zupt_sigma_max: float | None = None
     grade_sigma: float | None = None
     grade_corr_s: float = 10.0
     zupt_accel_h: float = 0.1
@@ -662,8 +669,9 @@ class FilterConfig:
 #: (benchmarks/platforms_start.py); not a boat, which yaws about its course in the waves.
 #: ``auto`` is the car's, and :data:`SLOW_PLATFORM`'s when the start shows no car.
 PLATFORMS = {
-    "car": dict(nhc=True, zupt=True, zupt_speed_sigmas=2.0, grade_sigma=0.08,
-                any_start="fallback", course_heading=True, course_heading_sigma=4.0 * DEG),
+    "car": dict(nhc=True, zupt=True, zupt_speed_sigmas=2.0, zupt_sigma_max=1.0,
+                grade_sigma=0.08, any_start="fallback", course_heading=True,
+                course_heading_sigma=4.0 * DEG),
     # a walker holding the unit ahead: it moves along its nose, 0-10 deg off (a mount state)
     "pedestrian": dict(nhc=True, mount_states=True, mount_sigma=10.0 * DEG, zupt=True,
                        zupt_speed=0.1, any_start="now", course_heading=True,
@@ -691,8 +699,8 @@ PLATFORMS = {
 #: with a mounting-yaw state (it removed two diverging walker and rover starts, 313 m and 26 m),
 #: zero-velocity updates only when the INS is nearly still, the course a loose heading.
 SLOW_PLATFORM = dict(nhc=True, mount_states=True, mount_sigma=15.0 * DEG, zupt_speed=0.1,
-                     zupt_speed_sigmas=0.0, zaru_steady_s=2.0, grade_sigma=None,
-                     course_heading=True, course_heading_sigma=20.0 * DEG,
+                     zupt_speed_sigmas=0.0, zupt_sigma_max=None, zaru_steady_s=2.0,
+                     grade_sigma=None, course_heading=True, course_heading_sigma=20.0 * DEG,
                      use_magnetometer=True, speed_hold=True)
 PLATFORM_ALIASES = {"ship": "boat", "walker": "pedestrian", "multirotor": "drone"}
 PLATFORM_NAMES = ("auto",) + tuple(PLATFORMS) + tuple(PLATFORM_ALIASES)

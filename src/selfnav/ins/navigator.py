@@ -333,6 +333,8 @@ class Navigator:
         self._fix_dt_median = 0.0
         self._blk_w, self._blk_f, self._blk_span = [], [], 0.0
         self._still = False
+        self._rest = False                 # ... and rest known: the zero-velocity update
+        self._braked_to_rest = False
         self._t_grade = -np.inf
         self._pace = collections.deque()      # (t, forward speed) while the fixes are used
         self._t_pace = -np.inf
@@ -579,7 +581,7 @@ class Navigator:
         self._blk_w, self._blk_f, self._blk_span = [], [], 0.0
         self._fwd_hist.clear()
         self._rate_hist.clear()
-        self._imu_still = self._still_from_braking = False
+        self._imu_still = self._still_from_braking = self._braked_to_rest = False
         self._hyp = None
         if self.magcal is not None:
             self.magcal.new_stretch()      # the gyros' heading has a gap
@@ -836,9 +838,13 @@ class Navigator:
         imu_still = bool(veh.zupt) and _still(w_blk, f_blk, flt, veh, widen="gyro")
         if imu_still and not self._imu_still:
             # a still run entered from braking is a stop; from speeding up, a cruise (an IMU
-            # cannot tell a cruise from rest)
-            self._still_from_braking = (len(self._fwd_hist) > 0 and float(
-                np.mean(self._fwd_hist)) < -veh.zupt_brake_accel)
+            # cannot tell a cruise from rest). A braking to rest lasts until the car stands:
+            # one that eased off before the run (a slow turn, then a cruise) is not a stop
+            fwd = np.asarray(self._fwd_hist, float)
+            n_last = max(1, int(round(veh.zupt_brake_last_s / veh.aid_step)))
+            self._still_from_braking = bool(len(fwd) and fwd.mean() < -veh.zupt_brake_accel)
+            self._braked_to_rest = bool(self._still_from_braking
+                                        and fwd[-n_last:].mean() < -veh.zupt_brake_accel)
         elif not imu_still and len(f_blk):
             # along the nose, gravity removed with the INS's pitch (its heading may be anything
             # at a start). The verdict holds until the next still run begins: after a stop,
@@ -853,8 +859,10 @@ class Navigator:
             v_max = max(v_max, min(veh.zupt_speed_sigmas
                                    * float(np.sqrt(flt.P[3, 3] + flt.P[4, 4])),
                                    veh.zupt_speed_cap))
-        slow = bool(veh.zupt and np.linalg.norm(flt.ins.velocity_n) < v_max)
+        speed = float(np.linalg.norm(flt.ins.velocity_n))
+        slow = bool(veh.zupt and speed < v_max)
         self._still = slow and imu_still
+        self._rest = self._still and self._rest_known(speed, flt, veh)
         # a zero rate judged still only through the widened test (the rates within what the
         # filter does not know of its gyro biases): on a slow platform the INS slow and the
         # IMU so still for ``zaru_steady_s``, the rates one bias (constant within the rate
@@ -885,7 +893,7 @@ class Navigator:
                 m = ZeroRate(w_blk + (flt.bg - f.bg), veh.zaru_sigma, span).model(f)
                 if self._still or f.nis(m) <= self._gate_vel3:
                     dx = f.update(m)
-            if self._still:
+            if self._rest:
                 dx = dx + f.update(ZeroVelocity(veh.zupt_sigma).model(f))
             elif veh.nhc:
                 dx = dx + f.update(NonHolonomic(veh.nhc_sigma, veh.nhc_sigma_up
@@ -934,6 +942,25 @@ class Navigator:
         self.bank.maintain(te, flt)
         if flt.layout.toff is not None:
             self._check_time_offset(te)
+
+    def _rest_known(self, speed, flt, veh) -> bool:
+        """May a still, slow block take the zero-velocity update (σ ``zupt_sigma``)? An IMU
+        cannot tell rest from a cruise, and the update makes the filter sure of rest: taken on
+        a cruise, it collapses the velocity and (through their correlation) the position σ
+        onto a lie. So the INS must know it is slow — its speed below ``zupt_speed`` with a
+        speed σ within ``zupt_sigma_max`` (simulated campaign drive 8952012862136796095: a
+        dead reckoning through a Gauss–Markov window whose INS speed drifted to 1.0 m/s at
+        σ 2.7 m/s while the car cruised at 2.8 m/s, clamped to rest: σ_h 75 → 17 m, 200 m off)
+        — or the still run must have been braked into, up to its start, at a speed within
+        ``zupt_speed_sigmas`` σ of rest (at most ``zupt_speed_cap``: a stop the INS reached
+        at 2–4 m/s; not a car that slowed in a turn and cruised on at 2.8 m/s, clamped to
+        rest a second after its start, 3704056357717984369: 60 m off at σ 4 m)."""
+        sv = float(np.sqrt(max(flt.P[3, 3] + flt.P[4, 4], 0.0)))
+        if self._braked_to_rest and speed < max(veh.zupt_speed, min(
+                veh.zupt_speed_sigmas * sv, veh.zupt_speed_cap)):
+            return True
+        return speed < veh.zupt_speed and (veh.zupt_sigma_max is None
+                                           or sv <= veh.zupt_sigma_max)
 
     def _hold_pace(self, te, imu_still, w_z):
         """``vehicle.speed_hold``: while the fixes are used, learn the pace (the INS's forward
