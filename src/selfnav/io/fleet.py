@@ -10,9 +10,9 @@ accepted as it comes:
   (``2019-03-11T08:33:24+00:00``); the output keeps the input's text;
 * repeated time stamps in a track (two positions in the same second) are merged into one fix
   (positions averaged; positions that disagree by more than :data:`REPEAT_AGREE_M` -- a
-  multipath fix beside a good one -- give the one nearest the neighbouring fixes), rows out of time order are ordered, a track's rows may be spread over
-  the file; each of these gives one line (a :class:`~selfnav.errors.SelfnavWarning`) with the
-  count;
+  multipath fix beside a good one -- give the one nearest the neighbouring fixes), rows out of
+  time order are ordered, a track's rows may be spread over the file; each of these gives one
+  line (a :class:`~selfnav.errors.SelfnavWarning`) with the count;
 * a bad row (a value that is not a number, a latitude beyond ±90°) is skipped with one line
   naming the track and the file line; a track left with fewer than two fixes is reported and
   left out — the other tracks are read.
