@@ -14,6 +14,8 @@ master seed 1 (40 drives), the figures in README and docs/navigator.md are maste
         [--out runs.csv] [--json]
     python benchmarks/roadnav_montecarlo.py --replay SEED [--odometer] --write DIR
         (the scenario of one drive as a TOML file and the commands that replay it)
+    python benchmarks/roadnav_montecarlo.py --drives-md runs.csv
+        (issue 18's per-drive σ table of a results file, as in docs/honest_sigma.md)
 """
 from __future__ import annotations
 
@@ -86,6 +88,30 @@ def table(summary: dict) -> str:
     return "\n".join(rows)
 
 
+def drive_table(csv_path: Path) -> str:
+    """The per-drive σ table of docs/honest_sigma.md from a results file of ``--out``: run
+    seed, IMU, map (``—`` when the navigator ran without it), windows, start, horizontal RMS,
+    p95 of error/σ_h, share beyond 5σ, and whether the drive meets issue 18's test (p95 ≤ 3,
+    ≤ 1 % beyond 5σ); a header line with the count first."""
+    import csv
+
+    with open(csv_path) as fh:
+        rows = list(csv.DictReader(ln for ln in fh if not ln.startswith("#")))
+    out = ["| run seed | IMU | map | windows | start s | horizontal RMS m | p95 error/σ | > 5σ "
+           "| met |", "| --- | --- | --- | --- | ---: | ---: | ---: | ---: | --- |"]
+    n_ok = 0
+    for r in rows:
+        p95, b5 = float(r["err_sigma_p95"]), float(r["beyond_5sigma"])
+        ok = p95 <= 3.0 and b5 <= 0.01          # NaN (no start) fails both
+        n_ok += ok
+        used = str(r["map_aid"]).strip() in ("1", "1.0", "True")
+        mp = r["map"] if used else f"— ({r['map']})"
+        out.append(f"| {r['seed']} | {r['grade']} | {mp} | {r['windows']} | "
+                   f"{float(r['start_s']):.0f} | {float(r['horizontal_rms_m']):.1f} | {p95:.2f} "
+                   f"| {100 * b5:.1f} % | {'yes' if ok else '**no**'} |")
+    return f"{n_ok} of {len(rows)} drives meet it\n\n" + "\n".join(out)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--runs", type=int, default=100)
@@ -99,7 +125,13 @@ def main() -> None:
     ap.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
                     help="a campaign parameter (selfnav.campaigns.ROADNAV_DEFAULTS), e.g. "
                          "map_aid=0, grade=mixed, kinds=white,gm,outage")
+    ap.add_argument("--drives-md", type=Path, metavar="CSV",
+                    help="print the per-drive σ table (docs/honest_sigma.md) of a results file "
+                         "written by --out, and run nothing")
     a = ap.parse_args()
+    if a.drives_md is not None:
+        print(drive_table(a.drives_md))
+        return
     params = {"odometer": int(a.odometer)}
     for p in a.param:
         k, _, v = p.partition("=")
