@@ -33,6 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from selfnav import datum as dm
+from selfnav.earth import enu_offset
 from selfnav.errors import InputError, SelfnavWarning
 from selfnav.io.csvio import open_text, parse_numbers, parse_times, refuse_numeric_header
 from selfnav.types import GnssData
@@ -347,22 +348,23 @@ def _merge_repeated(t, cols):
         out[c] = np.where(cnt > 0, s / np.maximum(cnt, 1), np.nan)
     if "lat_deg" not in cols or "lon_deg" not in cols or len(tu) < 2:
         return tu, out, inv, 0
-    lat, lon = np.asarray(cols["lat_deg"], float), np.asarray(cols["lon_deg"], float)
-    k_lon = np.cos(np.radians(np.nanmedian(lat)))
-    m_deg = 111_195.0                   # metres per degree of a great circle
+    lat, lon = np.radians(cols["lat_deg"]), np.radians(cols["lon_deg"])
+    lat0, lon0 = float(lat[0]), float(lon[0])
+
+    def local(la, lo):                  # east, north m from the track's first row
+        return enu_offset(lat0, lon0, 0.0, la, lo, 0.0)[..., :2]
+
+    mean_en = local(np.radians(out["lat_deg"]), np.radians(out["lon_deg"]))
     sig = np.asarray(cols.get("sigma_m", np.full(len(t), np.nan)), float)
     chosen = 0
     for j in np.flatnonzero(np.bincount(inv) > 1):
         rows = np.flatnonzero(inv == j)
-        x, y = lon[rows] * k_lon * m_deg, lat[rows] * m_deg
-        mx, my = np.median(x), np.median(y)
-        agree = max(REPEAT_AGREE_M, 5 * np.nan_to_num(np.nanmax(sig[rows]), nan=0.0)) \
-            if np.isfinite(sig[rows]).any() else REPEAT_AGREE_M
-        if not np.all(np.hypot(x - mx, y - my) <= agree):
+        en = local(lat[rows], lon[rows])
+        s = sig[rows]
+        agree = max(REPEAT_AGREE_M, 5 * np.nanmax(s)) if np.isfinite(s).any() else REPEAT_AGREE_M
+        if not np.all(np.hypot(*(en - np.median(en, axis=0)).T) <= agree):
             nb = [k for k in (j - 1, j + 1) if 0 <= k < len(tu)]
-            nx = np.mean([out["lon_deg"][k] for k in nb]) * k_lon * m_deg
-            ny = np.mean([out["lat_deg"][k] for k in nb]) * m_deg
-            keep = rows[np.argmin(np.hypot(x - nx, y - ny))]
+            keep = rows[np.argmin(np.hypot(*(en - mean_en[nb].mean(axis=0)).T))]
             for c, v in cols.items():
                 out[c][j] = v[keep]
             chosen += 1

@@ -438,12 +438,13 @@ class HmmMatcher:
         last = np.concatenate([first[1:] - 1, [n - 1]]) if n else first
         cnt = np.bincount(run).astype(float)
         w = (~out).astype(float)                # an outlier of a standing car: not in the mean
+        n_mean = np.bincount(run, w) if n else cnt
         exy = np.column_stack([np.bincount(run, w * xy[:, 0]), np.bincount(run, w * xy[:, 1])]) \
-            / np.bincount(run, w)[:, None] if n else xy
+            / n_mean[:, None] if n else xy
         starts = np.asarray(bounds[:-1])
         eb = np.concatenate([run[starts[starts < n]], [len(first)]]).astype(np.int64)
         return _Epochs(run, exy, np.bincount(run, sig) / cnt if n else sig, ts[first],
-                       ts[last], eb, first, out, np.bincount(run, w) if n else cnt)
+                       ts[last], eb, first, out, n_mean)
 
     def _gaps(self, ep: _Epochs):
         """Time from each epoch to the next (inf across tracks) and where only a break is
