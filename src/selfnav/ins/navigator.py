@@ -184,6 +184,18 @@ def _still(w_blk, f_blk, flt, veh, widen: bool | str = False):
             and max(math.hypot(v[0], v[1]) for v in f_h) < veh.zupt_accel_h + slack_f)
 
 
+def _speed_sigma(flt) -> float:
+    """σ of the INS's horizontal speed, m/s."""
+    return float(np.sqrt(max(flt.P[3, 3] + flt.P[4, 4], 0.0)))
+
+
+def _braked_speed_bound(flt, veh) -> float:
+    """The INS speed under which a still run braked into is rest: ``zupt_speed_sigmas`` of
+    its speed σ, at most ``zupt_speed_cap``, at least ``zupt_speed``."""
+    return max(veh.zupt_speed, min(veh.zupt_speed_sigmas * _speed_sigma(flt),
+                                   veh.zupt_speed_cap))
+
+
 def set_course_heading(flt, cov_v, sigma_course):
     """``flt``'s velocity and heading covariance for a heading taken from the course of its
     velocity (:func:`selfnav.ins.course.course_heading_covariance`): the horizontal velocity
@@ -852,13 +864,9 @@ class Navigator:
             self._fwd_hist.append(float(f_blk[:, 1].mean()) - flt.gravity(
                 flt.ins.lat, flt.ins.h) * flt.ins.C_nb[1, 2])
         self._imu_still = imu_still
-        v_max = veh.zupt_speed
-        if self._still_from_braking:
-            # after a braking, rest is what the INS's speed allows within its σ: a stop the
-            # INS reached at 2-4 m/s (its velocity that far off) was never updated
-            v_max = max(v_max, min(veh.zupt_speed_sigmas
-                                   * float(np.sqrt(flt.P[3, 3] + flt.P[4, 4])),
-                                   veh.zupt_speed_cap))
+        # after a braking, rest is what the INS's speed allows within its σ: a stop the INS
+        # reached at 2-4 m/s (its velocity that far off) was never updated
+        v_max = _braked_speed_bound(flt, veh) if self._still_from_braking else veh.zupt_speed
         speed = float(np.linalg.norm(flt.ins.velocity_n))
         slow = bool(veh.zupt and speed < v_max)
         self._still = slow and imu_still
@@ -955,12 +963,10 @@ class Navigator:
         ``zupt_speed_sigmas`` σ of rest (at most ``zupt_speed_cap``: a stop the INS reached
         at 2–4 m/s; not a car that slowed in a turn and cruised on at 2.8 m/s, clamped to
         rest a second after its start, 3704056357717984369: 60 m off at σ 4 m)."""
-        sv = float(np.sqrt(max(flt.P[3, 3] + flt.P[4, 4], 0.0)))
-        if self._braked_to_rest and speed < max(veh.zupt_speed, min(
-                veh.zupt_speed_sigmas * sv, veh.zupt_speed_cap)):
+        if self._braked_to_rest and speed < _braked_speed_bound(flt, veh):
             return True
         return speed < veh.zupt_speed and (veh.zupt_sigma_max is None
-                                           or sv <= veh.zupt_sigma_max)
+                                           or _speed_sigma(flt) <= veh.zupt_sigma_max)
 
     def _hold_pace(self, te, imu_still, w_z):
         """``vehicle.speed_hold``: while the fixes are used, learn the pace (the INS's forward
