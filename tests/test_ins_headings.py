@@ -9,17 +9,43 @@ import pytest
 from selfnav import attitude as att
 from selfnav.earth import enu_offset
 from selfnav.ins import config as ic
+from selfnav.ins.ekf import IBG
 from selfnav.ins.headings import heading_hypotheses, split_heading
 from selfnav.ins.navigator import initial_filter
 
 
-def _filter():
+def _filter(yaw_bias_sigma_deg=0.05):
+    """A start within the linear range: heading σ 2°, and its gyro biases measured (a stop
+    before it) to ``yaw_bias_sigma_deg`` °/s — ``None``: the grade's prior (1 °/s)."""
     cfg = ic.navigator_config()
     init = {"t": 0.0, "lat": math.radians(60.0), "lon": math.radians(25.0), "h": 10.0,
             "velocity_n": np.array([0.0, 8.0, 0.0]), "C_nb": att.dcm_nb_from_euler(0.0, 0.0, 0.0),
             "sigmas": ([3.0, 3.0, 5.0], [0.3, 0.3, 0.3],
                        [math.radians(0.5), math.radians(0.5), math.radians(2.0)])}
+    if yaw_bias_sigma_deg is not None:
+        init.update(gyro_bias=np.zeros(3),
+                    gyro_bias_sigma=np.full(3, math.radians(yaw_bias_sigma_deg)))
     return cfg, initial_filter(cfg, init)
+
+
+def test_a_start_unsure_of_its_yaw_bias_is_split_by_default():
+    """The default splits a start whose z gyro bias is only the grade's prior (1 °/s: a
+    consumer part moving with no stop to measure it) along that bias even when its heading
+    is within the linear range — seven yaw-bias hypotheses, the prior's σ back by moment
+    matching — and leaves a start whose bias a stop measured as one filter."""
+    cfg, f = _filter(None)
+    assert cfg.init.yaw_bias_split_sigma == pytest.approx(math.radians(0.5))
+    hyp = split_heading(f, cfg)
+    assert hyp is not None
+    # the heading within the linear range: its offsets ±6° carry no weight (the first fix
+    # prunes them), the seven yaw-bias offsets at heading 0 carry it all
+    live = hyp.weights > 1e-9
+    assert live.sum() == 7 and np.allclose(hyp.deltas[live], 0.0)
+    w, b = hyp.weights, hyp.bias_deltas
+    iz = IBG.start + 2                                     # the z gyro's bias
+    s2 = np.array([g.P[iz, iz] for g in hyp.filters])
+    assert float(w @ (s2 + b * b)) == pytest.approx(float(f.P[iz, iz]), rel=0.05)
+    assert split_heading(_filter()[1], cfg) is None
 
 
 @pytest.mark.parametrize("weight", [0.5, 0.2])

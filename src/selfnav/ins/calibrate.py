@@ -481,16 +481,11 @@ class NoiseAdapter:
         reopened = False
         if not may_reopen:
             self.forget()
-        elif self.reopen_gates and dof == 2:
-            self.window = (self.window + [float(nis_value)])[-max(self.reopen_gates):]
-            for n, gate in self.reopen_gates.items():
-                total = sum(self.window[-n:])
-                if len(self.window) >= n and total > gate:
-                    flt.P *= min(total / (2 * n), c.reopen_cap)
-                    self.forget()
-                    self.reopenings += 1
-                    reopened = True
-                    break
+        else:
+            k = self.reopen_factor(nis_value, dof)
+            if k is not None:
+                flt.P *= k
+                reopened = True
         x = min(nis_value / dof, c.clip)
         self.fix_ratio += self.alpha * (x - self.fix_ratio)
         target = max(1.0, self.fix_ratio / c.trigger,
@@ -501,6 +496,23 @@ class NoiseAdapter:
             flt.q_scale = new
             self.updates += 1
         return reopened
+
+    def reopen_factor(self, nis_value, dof):
+        """The reopening test alone (module docstring, item 4): the fix's ``nis_value`` joins
+        the window; when the last ``n`` of them sum beyond their gate, the factor ``P`` is to
+        be multiplied by (their mean over their dimension, at most ``reopen_cap``) — the
+        window begins again and the reopening is counted — else None. For a filter whose
+        noise scale is not this adapter's to move (a heading hypothesis)."""
+        if not self.reopen_gates or dof != 2:
+            return None
+        self.window = (self.window + [float(nis_value)])[-max(self.reopen_gates):]
+        for n, gate in self.reopen_gates.items():
+            total = sum(self.window[-n:])
+            if len(self.window) >= n and total > gate:
+                self.forget()
+                self.reopenings += 1
+                return min(total / (2 * n), self.cfg.reopen_cap)
+        return None
 
     def forget(self):
         """The reopening test's window begins again (its innovations were another

@@ -224,12 +224,13 @@ class Initialisation:
     heading_split_max : the most hypotheses (a start with no heading: the whole circle)
     yaw_bias_split_sigma : the filter's linear range for the z gyro's bias (σ, rad/s): a start
         less sure of it (a consumer gyro's 1 °/s, moving, no stop to measure it) is split,
-        within each heading hypothesis, into hypotheses this wide — a policy; a 0.7 °/s error
-        at σ 0.35 °/s left a simulated consumer start 26° off after a minute, 0.35 °/s
-        converged. None (the default, for now): never — 0.35 °/s is measured in
-        docs/ekf.md (fewer overconfident simulated drives, but one tuning drive 41 → 206 m
-        RMS: its hypotheses unresolved when a Gauss–Markov window began; drive_0708, whose
-        stop now gives its start the gyro bias, is the same either way)
+        within each heading hypothesis, into hypotheses this wide — a policy of the estimator.
+        0.5 °/s (stop 52; off before): a 0.7 °/s error at σ 0.35 °/s left a simulated consumer
+        start 26° off after a minute, 0.35 °/s converged; a 2.16 °/s yaw bias took every
+        heading hypothesis 25–31° off at σ 8° within 15 s (short consumer drive 32). At
+        0.35 °/s (stop 46) a tuning drive ran 244 m off where a Gauss–Markov window began
+        while the sum was unresolved; 0.5 °/s keeps the same seven offsets a little wider
+        (docs/ekf.md has the campaigns). None: never split
     yaw_bias_split_max : the most yaw-bias hypotheses per heading hypothesis
     heading_prune_ratio : a hypothesis this many times less likely than the best is dropped
     heading_resolved_weight : the sum collapses to its best hypothesis once it holds this
@@ -276,7 +277,7 @@ class Initialisation:
     course_heading_sigma: float = 4.0 * DEG
     heading_split_sigma: float | None = 3.0 * DEG
     heading_split_max: int = 31
-    yaw_bias_split_sigma: float | None = None
+    yaw_bias_split_sigma: float | None = 0.5 * DEG
     yaw_bias_split_max: int = 7
     heading_prune_ratio: float = 1e4
     heading_resolved_weight: float = 0.99

@@ -18,7 +18,7 @@ the linear range), each a full filter conditioned on its offset::
 
 (the states correlated with the heading — the velocity of a start taken from the course —
 move with it), with prior weights ``N(δ_k; 0, σ² − σ_k²)``. With ``yaw_bias_split_sigma``
-set (off by default) each heading hypothesis is split the same way along the z gyro's bias
+set (0.5 °/s by default) each heading hypothesis is split the same way along the z gyro's bias
 (a consumer part's 1 °/s at a start in motion leaves the linear range within seconds). Every
 IMU sample, constraint and fix goes to every hypothesis; each fix multiplies a hypothesis'
 weight by its likelihood (robust: its normalised innovation counts at most up to the gate, so

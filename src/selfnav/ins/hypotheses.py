@@ -578,10 +578,15 @@ class FaultBank:
             # health and the faults that remain cannot be told apart (a dead reckoning wider
             # than what distinguishes them): the fix is fused as their mixture — its σ carrying
             # the variance those faults would add, weighted by their posterior — so a fix
-            # inside the envelope is never refused for long, and taken no more than it is worth
+            # inside the envelope is never refused for long, and taken no more than it is worth.
+            # As above, that variance is the run's common offset: N times over for each of its
+            # N fixes (fused as independent, three fixes of a Gauss–Markov window at p 1.00
+            # took a consumer dead reckoning's σ from 250 to 68 m while it was 180 m off:
+            # simulated drive 2855913014240202526)
+            add = test["add_R"] * max(1, len(self.run))
             return Verdict(FixStatus.DEGRADED, f"{why}; fused with the faults' variance "
-                           f"(p {test['p_fault']:.2f}, σ +{np.sqrt(test['add_R'][0, 0]):.0f} m)",
-                           nis, apply=True, add_R=test["add_R"])
+                           f"(p {test['p_fault']:.2f}, σ +{np.sqrt(add[0, 0]):.0f} m)",
+                           nis, apply=True, add_R=add)
         if not in_gate:
             why = f"outside the dead-reckoning envelope (NIS {nis:.3g}); {why}"
         return Verdict(FixStatus.SUSPECT if in_gate else FixStatus.REJECTED, why, nis)

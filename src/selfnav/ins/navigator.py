@@ -1340,16 +1340,30 @@ class Navigator:
             self.bank.forget_innovations()
             self._reset_flag = True
         nis, used, nis_v, nis_vel = info[id(self.flt)]
+        if self.flt is not m_old and self.adapter is not None:
+            self.adapter.forget()
+        reopen = None
         if used:
             self._t_last_fused = fx.t
             if self.road_aid is not None:
                 self.road_aid.add_fix(fx.t, fx.lat, fx.lon, fx.sigma_h)
+            if self.adapter is not None and self.bank.episode is None \
+                    and not self.bank.mature(fx.t):
+                # the best hypothesis' innovations tested as M's are: a sum none of whose
+                # hypotheses is near the truth (a start given 41° off at σ 4.5°, split into
+                # 49 along its heading and yaw bias) is as overconfident as one filter
+                reopen = self.adapter.reopen_factor(nis, 2)
         w = float(np.max(hyp.weights))
         why = (f"heading hypotheses: {len(hyp.filters)} left, the best at "
                f"{np.degrees(hyp.deltas[hyp.best]):+.0f}° holds {w:.2f}")
         self._log(fx, FixStatus.USED if used else FixStatus.REJECTED,
                   why if used else f"χ² gate (NIS {nis:.3g}); {why}", nis, nis_v, nis_vel)
-        if hyp.resolved(fx.t):
+        if reopen is not None:
+            # collapsed (the sum's spread in its covariance), then reopened as M would be
+            self._collapse_hypotheses(fx.t)
+            self.flt.P *= reopen
+            self.bank.covariance_reopened(fx.t)
+        elif hyp.resolved(fx.t):
             self._collapse_hypotheses(fx.t)
 
     def _collapse_hypotheses(self, t):
