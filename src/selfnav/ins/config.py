@@ -230,7 +230,7 @@ class Initialisation:
         heading hypothesis 25–31° off at σ 8° within 15 s (short consumer drive 32). At
         0.35 °/s (stop 46) a tuning drive ran 244 m off where a Gauss–Markov window began
         while the sum was unresolved; at 0.5 °/s the seven offsets are 1 °/s apart (±3 °/s,
-        against ±2.1 °/s), each 0.5 °/s wide (docs/ekf.md has the campaigns). None: never
+        against ±2.1 °/s), each 0.5 °/s wide (docs/ekf.md has the campaigns); None: no split
     yaw_bias_split_max : the most yaw-bias hypotheses per heading hypothesis
     heading_prune_ratio : a hypothesis this many times less likely than the best is dropped
     heading_resolved_weight : the sum collapses to its best hypothesis once it holds this
