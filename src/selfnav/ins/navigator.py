@@ -175,13 +175,15 @@ def _still(w_blk, f_blk, flt, veh, widen: bool | str = False):
     if widen is True:
         # the tilt (the attitude's first two) and the horizontal accelerometer biases
         slack_f = 3.0 * math.sqrt(9.81**2 * max(d[IP][:2]) + max(d[IBA][:2]))
+    if not (np.max(np.linalg.norm(w_blk, axis=1)) < veh.zupt_gyro + slack_w
+            and np.std(np.linalg.norm(f_blk, axis=1)) < veh.zupt_accel):
+        return False
     # each half of the block level on its own (the block's mean, between them, is then too):
     # a brake that turns into a pull-away inside the block keeps |f| and averages to level
     h = len(f_blk) // 2
-    f_h = [flt.ins.C_nb.T @ f_blk[:h].mean(0), flt.ins.C_nb.T @ f_blk[h:].mean(0)]
-    return (np.max(np.linalg.norm(w_blk, axis=1)) < veh.zupt_gyro + slack_w
-            and np.std(np.linalg.norm(f_blk, axis=1)) < veh.zupt_accel
-            and max(math.hypot(v[0], v[1]) for v in f_h) < veh.zupt_accel_h + slack_f)
+    C_bn = flt.ins.C_nb.T
+    return max(math.hypot(*(C_bn @ half.mean(0))[:2]) for half in (f_blk[:h], f_blk[h:])) \
+        < veh.zupt_accel_h + slack_f
 
 
 def _speed_sigma(flt) -> float:
