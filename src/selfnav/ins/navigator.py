@@ -1337,13 +1337,13 @@ class Navigator:
         hyp.prune()
         self.flt = hyp.filters[hyp.best]
         if self.flt is not m_old:
-            # M is another hypothesis now: its innovations so far were another filter's, and
-            # the smoother's record breaks here
+            # M is another hypothesis now: its innovations so far were another filter's (the
+            # bank's and the reopening test's), and the smoother's record breaks here
             self.bank.forget_innovations()
+            if self.adapter is not None:
+                self.adapter.forget()
             self._reset_flag = True
         nis, used, nis_v, nis_vel = info[id(self.flt)]
-        if self.flt is not m_old and self.adapter is not None:
-            self.adapter.forget()
         reopen = None
         if used:
             self._t_last_fused = fx.t

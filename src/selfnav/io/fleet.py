@@ -354,8 +354,8 @@ def _merge_repeated(t, cols):
     def local(la, lo):                  # east, north m from the track's first row
         return enu_offset(lat0, lon0, 0.0, la, lo, 0.0)[..., :2]
 
-    mean_en = local(np.radians(out["lat_deg"]), np.radians(out["lon_deg"]))
     sig = np.asarray(cols.get("sigma_m", np.full(len(t), np.nan)), float)
+    lat_mean, lon_mean = np.radians(out["lat_deg"]), np.radians(out["lon_deg"])   # as merged
     chosen = 0
     for j in np.flatnonzero(np.bincount(inv) > 1):
         rows = np.flatnonzero(inv == j)
@@ -364,7 +364,8 @@ def _merge_repeated(t, cols):
         agree = max(REPEAT_AGREE_M, 5 * np.nanmax(s)) if np.isfinite(s).any() else REPEAT_AGREE_M
         if not np.all(np.hypot(*(en - np.median(en, axis=0)).T) <= agree):
             nb = [k for k in (j - 1, j + 1) if 0 <= k < len(tu)]
-            keep = rows[np.argmin(np.hypot(*(en - mean_en[nb].mean(axis=0)).T))]
+            nb_en = local(lat_mean[nb], lon_mean[nb])
+            keep = rows[np.argmin(np.hypot(*(en - nb_en.mean(axis=0)).T))]
             for c, v in cols.items():
                 out[c][j] = v[keep]
             chosen += 1
