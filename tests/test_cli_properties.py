@@ -47,9 +47,16 @@ TRUTH = _csv(("t", "lat_deg", "lon_deg", "h_m"),
              [(0.5 * k, 60.48 + 2e-6 * k, 26.95 + 1e-6 * k * k, 20.0) for k in range(40)])
 ATT = _csv(("t", "roll_deg", "pitch_deg", "heading_deg"),
            [(0.1 * k, 0.5, -0.2, 30.0 + 0.01 * k) for k in range(1, 151)])
-NMEA = "".join(
-    f"$GPGGA,1200{k:02d}.00,6028.800,N,02657.000,E,1,08,0.9,20.0,M,17.0,M,,*47\n"
-    for k in range(12))
+def _nmea_line(body):
+    """``$body*hh`` with the sentence's checksum (XOR of the body's characters)."""
+    x = 0
+    for ch in body:
+        x ^= ord(ch)
+    return f"${body}*{x:02X}\n"
+
+
+NMEA = "".join(_nmea_line(f"GPGGA,1200{k:02d}.00,6028.800,N,02657.000,E,1,08,0.9,20.0,M,17.0,M,,")
+               for k in range(12))
 
 
 def _pos_text(shared):

@@ -13,6 +13,7 @@ from selfnav.errors import InputError, SelfnavWarning
 from selfnav.io.csvio import open_text
 from selfnav.io.fleet import (build_tracks, merged_note, read_columns,  # noqa: F401
                               to_wgs84)
+from selfnav.io.nmea_rmc import checksum_ok
 from selfnav.types import GnssData
 
 #: GPS time origin 1980-01-06 in Unix-like seconds; GPS week seconds are counted from a Sunday.
@@ -65,10 +66,15 @@ def read_rtklib_pos(path) -> GnssData:
     path = Path(path)
     text = open_text(path)
     rows, lines = [], []
-    for i, ln in enumerate(text.splitlines()):
-        s = ln.strip()
-        if not s or s.startswith("%"):
-            continue
+    body = [(i, ln.strip()) for i, ln in enumerate(text.splitlines())]
+    body = [(i, s) for i, s in body if s and not s.startswith("%")]
+    if len(body) >= 3 and _partial_pos_row(body[-1][1], body[-2][1]):
+        # a solution file copied while RTKLIB was still writing it: the last row is cut short
+        warnings.warn(f"{path}: line {body[-1][0] + 1} is a partial row (fewer fields or a "
+                      "number cut short: the file was still being written when it was copied), skipped",
+                      SelfnavWarning, stacklevel=2)
+        body = body[:-1]
+    for i, s in body:
         parts = s.split()
         if len(parts) < 15:
             raise InputError(path, f"{len(parts)} fields: not an RTKLIB lat/lon .pos row", row=i + 1)
@@ -106,6 +112,24 @@ def read_rtklib_pos(path) -> GnssData:
                     a[:, 4].astype(int), str(path), sig_v, sig_vel)
 
 
+def _partial_pos_row(last: str, before: str) -> bool:
+    """A ``.pos`` row cut short: fewer fields than the row before it, or a field that is not
+    a number where that row has one."""
+    a, b = last.split(), before.split()
+    if len(a) < len(b):
+        return True
+    for x, y in zip(a[2:], b[2:]):
+        try:
+            float(y)
+        except ValueError:
+            continue
+        try:
+            float(x)
+        except ValueError:
+            return True
+    return False
+
+
 def _nmea_deg(v, hemi):
     d = float(v[: v.index(".") - 2])
     m = float(v[v.index(".") - 2:])
@@ -121,15 +145,29 @@ def read_nmea(path) -> GnssData:
     """
     path = Path(path)
     text = open_text(path)
-    t, lat, lon, h, sig, q = [], [], [], [], [], []
+    gga = []                                        # (line index, sentence)
     for i, ln in enumerate(text.splitlines()):
         s = ln.strip()
-        if not s.startswith("$") or len(s) < 7:
+        j = s.find("$")
+        if j < 0:
             continue
-        body = s[1:].split("*")[0]
-        f = body.split(",")
-        if f[0][2:] != "GGA" or len(f) < 12:
+        s = s[j:]                                   # a logger's time stamp before the sentence
+        if s[1:].split(",")[0][2:] == "GGA":
+            gga.append((i, s))
+    # a sentence cut short where the others carry a checksum: the logger stopped mid-line
+    if len(gga) >= 2 and "*" not in gga[-1][1] and "*" in gga[-2][1]:
+        warnings.warn(f"{path}: line {gga[-1][0] + 1} is a partial GGA sentence (the logger "
+                      "stopped mid-line), skipped", SelfnavWarning, stacklevel=2)
+        gga = gga[:-1]
+    t, lat, lon, h, sig, q = [], [], [], [], [], []
+    bad_sum = []
+    for i, s in gga:
+        if checksum_ok(s) is False:
+            bad_sum.append(i + 1)
             continue
+        f = s[1:].split("*")[0].split(",")
+        if len(f) < 12:
+            raise InputError(path, f"GGA sentence with {len(f)} fields (15 expected)", row=i + 1)
         if not f[6] or f[6] == "0" or not f[2] or not f[4]:
             continue
         try:
@@ -141,9 +179,16 @@ def read_nmea(path) -> GnssData:
             sig.append(2.5 * float(f[8]) if f[8] else np.nan)
             q.append(int(f[6]))
         except (ValueError, IndexError):
-            raise InputError(path, "malformed GGA sentence", row=i + 1) from None
+            raise InputError(path, "malformed GGA sentence (time, position, quality, HDOP or "
+                             "height field)", row=i + 1) from None
+    if bad_sum and t:
+        warnings.warn(f"{path}: {len(bad_sum)} GGA sentence{'s' if len(bad_sum) > 1 else ''} "
+                      f"with a wrong checksum skipped (corrupted bytes; first on line "
+                      f"{bad_sum[0]})", SelfnavWarning, stacklevel=2)
     if not t:
-        raise InputError(path, "no valid GGA fixes (is it NMEA?)")
+        why = (f"all {len(bad_sum)} have a wrong checksum (first on line {bad_sum[0]})"
+               if bad_sum else "is it NMEA 0183?")
+        raise InputError(path, f"no valid GGA fixes ({why})")
     t = np.unwrap(np.asarray(t), period=86400.0)
     sig = np.asarray(sig, dtype=float)
     sig = np.where(sig > 0, sig, np.nan)  # HDOP 0: not given (never a σ of zero)

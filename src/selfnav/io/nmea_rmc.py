@@ -72,8 +72,9 @@ class RmcData:
                         np.full(n, sigma_m), self.velocity_n.copy(), None, self.source)
 
 
-def _checksum_ok(s: str) -> bool | None:
-    """True/False when a ``*hh`` checksum is present, None when absent."""
+def checksum_ok(s: str) -> bool | None:
+    """True/False when a ``*hh`` checksum is present (the XOR of the characters between ``$``
+    and ``*``, NMEA 0183), None when absent."""
     if "*" not in s:
         return None
     body, _, cs = s[1:].partition("*")
@@ -138,7 +139,7 @@ def read_nmea_rmc(path) -> RmcData:
         f = s[1:].split("*")[0].split(",")
         if len(f[0]) < 5 or f[0][-3:] != "RMC":
             continue
-        ok = _checksum_ok(s)
+        ok = checksum_ok(s)
         if ok is False:
             rejected["checksum"] = rejected.get("checksum", 0) + 1
             continue
