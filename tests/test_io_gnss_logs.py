@@ -47,7 +47,8 @@ def test_a_pos_file_cut_mid_row_loses_that_row_only(shared_data, tmp_path):
 
 
 def test_a_pos_row_broken_inside_the_file_is_an_error_naming_its_line(shared_data, tmp_path):
-    lines = (shared_data / "rtklibexplorer_drive_0708" / "gnss_1934_sf.pos").read_text().splitlines()
+    pos = shared_data / "rtklibexplorer_drive_0708" / "gnss_1934_sf.pos"
+    lines = pos.read_text().splitlines()
     p = tmp_path / "bad.pos"
     p.write_text("\n".join(lines[:200] + [lines[200][:40]] + lines[201:400]) + "\n")
     with pytest.raises(InputError, match="line 201"):

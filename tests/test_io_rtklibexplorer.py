@@ -92,3 +92,54 @@ def test_bad_lines_are_one_line_in_selfnav_words(drive, tmp_path, edit, needle):
         read_imu(p)
     msg = str(e.value)
     assert needle in msg and "usecols" not in msg and "\n" not in msg
+
+
+# ------------------------------------------------- the axes checked before navigating (item 2)
+def _drive_records(drive):
+    from selfnav.io.readers import read_gnss
+
+    return read_imu(drive / "imu_1934.csv"), read_gnss(drive / "gnss_1934_sf.pos")
+
+
+def test_the_real_drive_agrees_with_its_preset_and_turns_with_its_track(drive):
+    """drive_0708 as read (its preset): up +z by gravity, forward +y by the GNSS accelerations,
+    the RTK course turning 1.00 rad per gyro radian (±0.003), nothing to warn about."""
+    imu, gnss = _drive_records(drive)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", SelfnavWarning)
+        rep = D.imu_axes_report(imu, gnss)
+    assert rep["agrees"] is True and rep["axes_found"] == "RFU"
+    f = rep["forward"]
+    assert abs(f["turn_gain"] - 1.0) < 0.01 and f["sigma_turn_gain"] < 0.01
+    assert f["turn_r2"] > 0.9
+
+
+@pytest.mark.parametrize("scale, words", [(np.degrees(1.0), "look like deg/s"),
+                                          (-1.0, "the GNSS track the other")])
+def test_gyros_in_deg_per_s_or_turning_the_wrong_way_are_refused_by_navigate(drive, scale,
+                                                                             words):
+    """The same drive with its gyros in deg/s (below the reader's 35 rad/s alarm: a car's
+    corners read 20-30) or with their signs flipped (a logger that inverts the gyros, or
+    latitude and longitude swapped): one InputError naming the file before any navigation —
+    not a solution 400 m off with exit 0."""
+    import selfnav
+    from selfnav.types import ImuData
+
+    imu, gnss = _drive_records(drive)
+    bad = ImuData(imu.t, imu.omega_ib_b * scale, imu.f_ib_b, source="imu_1934.csv",
+                  meta=dict(imu.meta))
+    with pytest.raises(InputError, match=words) as e:
+        selfnav.navigate(bad, gnss)
+    assert str(e.value).startswith("imu_1934.csv")
+
+
+def test_platforms_that_yaw_about_their_course_raise_no_alarm():
+    """Simulated ship (yawing ±5° about a straight course in the waves), boat, walker and drone:
+    a course that does not follow the yaw is no evidence of units (too little of the course
+    explained, or the gain too uncertain): no error."""
+    import selfnav
+
+    for kind in ("ship", "boat", "pedestrian", "drone"):
+        sim = selfnav.simulate(kind, seed=7, duration=240)
+        f = D.detect_forward_axis(sim.imu, sim.gnss.as_gnss())
+        D.check_turn_gain(f, kind)

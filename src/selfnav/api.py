@@ -12,6 +12,7 @@ import warnings
 import numpy as np
 
 from selfnav import ins
+from selfnav.axes_detect import imu_axes_report
 from selfnav.errors import SelfnavError, SelfnavWarning
 from selfnav.evaluation import evaluate as _evaluate_trajectories
 from selfnav.evaluation import load_road_polylines
@@ -114,14 +115,16 @@ def navigate(imu: ImuData, gnss: GnssData | None, roads=None, *, method: str = "
     imu = report_gaps(imu)          # short gaps bridged, each long one said in one line
     if gnss is None and options.get("init") is None:
         raise SelfnavError("without GNSS the navigator needs an initial state (--init FILE)")
+    axes = None
     if gnss is not None:
         _check_overlap(imu, gnss)
+        axes = imu_axes_report(imu, gnss)     # gyros in deg/s or turning the other way: refused
     nav = navigator(imu, roads, smooth=smooth, **options)
     odo = None if odometer is None else odometer.shifted(0.0)
     ins.feed(nav, imu, gnss, odometer=odo, progress=progress)
     res = nav.result(smooth)
     fmt = float(imu.meta.get("format_time_offset_s", 0.0))
-    stats = {**res.stats, "smoothed": res.smoothed, "episodes": res.episodes,
+    stats = {**res.stats, "smoothed": res.smoothed, "episodes": res.episodes, "imu_axes": axes,
              "imu_time_offset_format_s": fmt,
              "imu_time_offset_s": fmt + res.stats.get("imu_time_offset_s", 0.0)}
     cols = {"sigma_h_m": res.sigma_h, "status": res.status,

@@ -150,6 +150,11 @@ class ForwardAxis:
         axis and the gyro signs are right; NaN without turns).
     epochs : int
         GNSS epochs used.
+    turn_gain, sigma_turn_gain, turn_r2 : float
+        The GNSS course rate over the gyro rate about −up (least squares through zero), its
+        1σ and the share of the course rate's variance it explains: ≈ 1 for gyros in rad/s,
+        ≈ 1/57.3 for deg/s read as rad/s, ≈ −1 for gyros turning the other way
+        (:func:`check_turn_gain`); NaN without turns.
     """
 
     axis: str
@@ -164,12 +169,17 @@ class ForwardAxis:
     handed: int
     turn_correlation: float
     epochs: int
+    turn_gain: float = float("nan")
+    sigma_turn_gain: float = float("nan")
+    turn_r2: float = float("nan")
 
     def to_dict(self) -> dict:
         return {"axis": self.axis, "yaw_mount_deg": math.degrees(self.yaw_mount_rad),
                 "sigma_yaw_deg": math.degrees(self.sigma_yaw_rad), "confidence": self.confidence,
                 "along_gain": self.along_gain, "lateral_gain": self.lateral_gain,
                 "handed": self.handed, "turn_correlation": self.turn_correlation,
+                "turn_gain": self.turn_gain, "sigma_turn_gain": self.sigma_turn_gain,
+                "turn_r2": self.turn_r2,
                 "epochs": self.epochs}
 
 
@@ -277,6 +287,9 @@ def detect_forward_axis(imu: ImuData, gnss: GnssData, *, up: UpAxis | None = Non
     corr = float("nan")
     if ok.sum() > 5 and np.std(chi_rate[ok]) > 1e-3 and np.std(turn[ok]) > 0:
         corr = float(np.corrcoef(chi_rate[ok], turn[ok])[0, 1])
+    # the course's noise falls with the speed: the gain weighted by its square
+    gain, sig_gain_turn, r2 = _turn_gain(chi_rate[ok], turn[ok], s_mid[ok] ** 2, 2.0 * k)
+    empty = replace(empty, turn_gain=gain, sigma_turn_gain=sig_gain_turn, turn_r2=r2)
     if ok.sum() < 8:
         return replace(empty, turn_correlation=corr, epochs=int(ok.sum()))
     # basis of the plane perpendicular to up
@@ -333,7 +346,67 @@ def detect_forward_axis(imu: ImuData, gnss: GnssData, *, up: UpAxis | None = Non
     if gain_f < 3.0 * sig_gain:
         conf = 0.0                                      # no along-track acceleration to see
     return ForwardAxis(axis_label(best, sgn), best, sgn, F, yaw, float(sig_perp), float(conf),
-                       gain_f, gain_r, handed, corr, int(ok.sum()))
+                       gain_f, gain_r, handed, corr, int(ok.sum()), gain, sig_gain_turn, r2)
+
+
+def _turn_gain(chi_rate, turn, weight, inflation):
+    """Weighted least-squares gain (through zero) of the course rate on the gyro rate and its
+    1σ, the residual variance inflated by the overlap of the spans, and the share of the
+    course rate's (weighted) variance the fit explains; epochs beyond 3 robust σ of the fit (a
+    GNSS outlier differenced into a course) dropped and the fit redone, twice. NaN with fewer
+    than 8 epochs or no turning."""
+    keep = np.isfinite(chi_rate) & np.isfinite(turn)
+    for _ in range(3):
+        w, x, y = weight[keep], turn[keep], chi_rate[keep]
+        sxx = float(w @ (x * x))
+        if len(x) < 8 or not sxx > 0:
+            return float("nan"), float("nan"), float("nan")
+        g = float(w @ (y * x)) / sxx
+        z = (chi_rate - g * turn) * np.sqrt(weight)          # whitened residuals
+        s2 = float(np.sum(z[keep] ** 2)) / (keep.sum() - 1)
+        syy = float(w @ (y * y))
+        r2 = 1.0 - float(np.sum(z[keep] ** 2)) / syy if syy > 0 else float("nan")
+        new = keep & (np.abs(z) <= 3.0 * 1.4826 * float(np.median(np.abs(z[keep]))))
+        if np.array_equal(new, keep):
+            break
+        keep = new
+    return g, math.sqrt(inflation * s2 / sxx), r2
+
+
+#: A turn gain is decided when its σ is below this, it lies within ``TURN_GAIN_Z`` σ of one
+#: explanation and beyond ``TURN_GAIN_REFUTE_Z`` σ of the right one (1), and the fit explains
+#: at least ``TURN_GAIN_MIN_R2`` of the course's turning (a ship yawing in the waves about a
+#: straight course has a gain near 0 too, but nothing of its course explained).
+TURN_GAIN_MAX_SIGMA = 0.1
+TURN_GAIN_Z = 4.0
+TURN_GAIN_REFUTE_Z = 10.0
+TURN_GAIN_MIN_R2 = 0.25
+
+
+def check_turn_gain(fwd: "ForwardAxis", source: str = "IMU data") -> None:
+    """Raise :class:`~selfnav.errors.InputError` when the gyros turn decisively unlike the GNSS
+    track: 57.3× faster (deg/s read as rad/s) or the other way (gyro signs flipped against the
+    accelerometers', latitude and longitude swapped: the up axis comes from gravity, so an axis
+    negated in both sensors does not flip it). Nothing when there is too little turning to
+    tell, or the gain is near 1."""
+    from selfnav.errors import InputError
+
+    g, sg = fwd.turn_gain, fwd.sigma_turn_gain
+    if not (np.isfinite(g) and np.isfinite(sg)) or sg > TURN_GAIN_MAX_SIGMA:
+        return
+    if not fwd.turn_r2 >= TURN_GAIN_MIN_R2:
+        return
+    if abs(g - 1.0) <= TURN_GAIN_REFUTE_Z * sg:
+        return
+    if abs(g - 1.0 / math.degrees(1.0)) <= TURN_GAIN_Z * max(sg, 1e-3):
+        raise InputError(source, f"the GNSS track turns {g:.4f} ± {sg:.4f} rad per radian the "
+                         f"gyros turn ({fwd.epochs} epochs; 1/57.3 = 0.0175 for gyros in "
+                         "deg/s): they look like deg/s, the file needs rad/s")
+    if abs(g + 1.0) <= TURN_GAIN_Z * sg:
+        raise InputError(source, f"the gyros turn one way and the GNSS track the other (gain "
+                         f"{g:.2f} ± {sg:.2f} over {fwd.epochs} epochs): gyro signs flipped "
+                         "against the accelerometers' (a logger that inverts its gyros) or "
+                         "latitude and longitude swapped in the GNSS file")
 
 
 # --------------------------------------------------------------------------- detected frames
@@ -392,10 +465,49 @@ def compare_frames(given: ImuFrame, detected: ImuFrame, *, yaw_tolerance_deg: fl
             + f" (detected axes {detected.axes.letters})")
 
 
+def imu_axes_report(imu: ImuData, gnss: GnssData) -> dict:
+    """The axes of an IMU record as read, checked against the data before a navigator runs on
+    it (issue 20, part 2): the up axis from gravity (the IMU rows the GNSS overlaps), the
+    forward axis from the GNSS accelerations, the gyro turn gain (:func:`check_turn_gain`:
+    gyros in deg/s or turning the other way raise :class:`~selfnav.errors.InputError`).
+
+    Rows read into the vehicle's RFU frame should show up ``+z`` and forward ``+y``: where a
+    confident detection says otherwise, one warning line names what was found. Rows left in
+    the sensor's own axes (``--imu-axes detect``) are reported with the ``--imu-axes`` the
+    detection reads them as. Returns the report (``up``, ``forward``, ``axes_found``,
+    ``agrees``) for the solution's statistics; the rows are not changed.
+    """
+    from selfnav.errors import warn
+
+    src = imu.source or "IMU data"
+    t = np.asarray(imu.t, float)
+    m = (t >= gnss.t[0]) & (t <= gnss.t[-1])
+    up = detect_up_axis(imu.f_ib_b[m] if m.sum() > 10 else imu.f_ib_b)
+    fwd = detect_forward_axis(imu, gnss, up=up)
+    check_turn_gain(fwd, src)
+    found = None
+    if up.index >= 0 and up.confidence >= 0.99 and fwd.index >= 0 and fwd.confidence >= 0.99:
+        found = frame_from_detection(up, fwd, yaw=False).axes.letters
+    rep = {"up": up.to_dict(), "forward": fwd.to_dict(), "axes_found": found, "agrees": None}
+    if imu.meta.get("axes") == "sensor":
+        return rep
+    bad = []
+    if up.index >= 0 and up.confidence >= 0.99 and up.axis != "+z":
+        bad.append(f"up is its {up.axis} by gravity")
+    if fwd.index >= 0 and fwd.confidence >= 0.99 and up.axis == "+z" and fwd.axis != "+y":
+        bad.append(f"forward is its {fwd.axis} by the GNSS accelerations")
+    rep["agrees"] = not bad
+    if bad:
+        given = imu.meta.get("axes_preset") or imu.meta.get("axes") or "the format's axes"
+        warn(f"{src}: read with IMU axes {given}, the data disagree: " + "; ".join(bad)
+             + " (expected +z up, +y forward): check --imu-axes")
+    return rep
+
+
 def _axis_of(row) -> str:
     j = int(np.flatnonzero(row)[0])
     return axis_label(j, int(row[j]))
 
 
-__all__ = ["ForwardAxis", "UpAxis", "compare_frames", "detect_forward_axis", "detect_up_axis",
-           "frame_from_detection", "gnss_velocity_n"]
+__all__ = ["ForwardAxis", "UpAxis", "check_turn_gain", "compare_frames", "detect_forward_axis",
+           "detect_up_axis", "frame_from_detection", "gnss_velocity_n", "imu_axes_report"]
