@@ -81,3 +81,20 @@ def test_nmea_whose_every_sentence_fails_its_checksum_is_refused_saying_so(tmp_p
     p.write_text("\n".join(s[:-2] + "00" for s in GGA) + "\n")
     with pytest.raises(InputError, match="wrong checksum"):
         read_nmea(p)
+
+
+def test_positions_in_radians_are_named_so(tmp_path):
+    """A native GNSS CSV whose lat_deg/lon_deg hold radians reads as a 30 m track off West
+    Africa: one warning says what they look like (the navigator's "never started" alone did
+    not); degrees read without it."""
+    from selfnav.io.gnss import read_gnss_csv
+
+    t = np.arange(20.0)
+    lat, lon = np.radians(60.52 + 1e-4 * t), np.radians(26.94 + 1e-4 * t)
+    for values, expect in (((lat, lon), 1), ((np.degrees(lat), np.degrees(lon)), 0)):
+        p = tmp_path / f"g{expect}.csv"
+        p.write_text("t,lat_deg,lon_deg,h_m\n" + "".join(
+            f"{a},{b:.9f},{c:.9f},20\n" for a, b, c in zip(t, *values)))
+        _, warned = _read(read_gnss_csv, p)
+        hits = [w for w in warned if "look like radians" in w]
+        assert len(hits) == expect, warned

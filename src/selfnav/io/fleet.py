@@ -448,12 +448,33 @@ def build_tracks(path, cols, lines, *, datum="wgs84", strict=False, default_id=N
             gnss = GnssData(tu, lat, lon, np.asarray(h, float), merged.get("sigma_m"), vel, None,
                             f"{path}#{tid}" if "track_id" in cols else str(path))
         tracks.append(FleetTrack(tid, gnss, inv, t_text, lines[rows], h_rows, str(path), error))
+    hint = radians_hint(vals["lat_deg"][ok], vals["lon_deg"][ok])
+    if hint:
+        _note(f"{path}: {hint}")
     for k, msg in enumerate(skipped_notes):
         if k == MAX_TRACK_NOTES:
             _note(f"{path}: {len(skipped_notes) - k} more tracks with skipped rows")
             break
         _note(msg)
     return tracks, form, counts
+
+
+def radians_hint(lat_deg, lon_deg) -> str | None:
+    """A note when positions given as degrees look like radians: every latitude within ±π/2,
+    every longitude within ±π, and all of them within 0.01 of each other (as degrees, a 1 km
+    square near 0° N 0° E; as radians, a 60 km area anywhere). None otherwise."""
+    lat, lon = np.asarray(lat_deg, float), np.asarray(lon_deg, float)
+    lat, lon = lat[np.isfinite(lat)], lon[np.isfinite(lon)]
+    if len(lat) < 2 or len(lon) < 2:
+        return None
+    if np.max(np.abs(lat)) > np.pi / 2 or np.max(np.abs(lon)) > np.pi:
+        return None
+    span = max(np.ptp(lat), np.ptp(lon))
+    if span >= 0.01:
+        return None
+    return (f"every lat_deg lies within ±π/2 and every lon_deg within ±π, {span:.2g} apart at "
+            f"most: they look like radians (lat {lat[0]:.6g} rad is {np.degrees(lat[0]):.5g}°), "
+            "the file needs degrees")
 
 
 def _groups(uid, inv, order):
