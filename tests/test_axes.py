@@ -131,6 +131,7 @@ def test_detected_axes_match_without_imu_axes(drive, spec, yaw_deg):
     assert up.confidence > 0.999 and up.tilt_rad < math.radians(3)
     fw = D.detect_forward_axis(raw, drive.gnss.as_gnss(velocity=True), up=up)
     assert fw.confidence > 0.999 and fw.handed == 1 and fw.turn_correlation > 0.9
+    assert abs(fw.turn_gain - 1.0) < max(3 * fw.sigma_turn_gain, 0.05)     # rad/s, not deg/s
     assert abs(fw.yaw_mount_rad - math.radians(yaw_deg)) < 3 * fw.sigma_yaw_rad
     assert fw.sigma_yaw_rad < math.radians(2.0)
     det = D.frame_from_detection(up, fw)
@@ -168,3 +169,27 @@ def test_up_axis_confidence_falls_near_45_degrees():
     up = D.detect_up_axis(np.tile([-9.81, 0.1, 0.0], (100, 1)))
     assert up.axis == "-x" and up.confidence > 0.999
     assert D.detect_up_axis(np.tile([0.5, 0.0, 0.2], (100, 1))).confidence == 0.0   # not gravity
+
+
+def test_navigate_reports_the_axes_it_finds(drive, tmp_path, capsys):
+    """Through the command line: the drive written in FRD (its gnss.csv holds positions only,
+    σ 1 m at 5 Hz), ``--imu-axes detect``: the JSON's ``imu_axes`` has up = the sensor's −z by
+    gravity, and no forward axis claimed (from positions alone its yaw σ is 20°+: not found,
+    honestly); read with the wrong axes (RFU), one warning names what gravity says."""
+    import json
+
+    from selfnav.cli import main
+
+    write_simulation(drive, tmp_path / "x", imu_axes="FRD")
+    d = tmp_path / "x"
+    code = main(["navigate", "--imu", str(d / "imu.csv"), "--gnss", str(d / "gnss.csv"),
+                 "--imu-axes", "detect", "--out", str(tmp_path / "a.csv"), "--json"])
+    out = capsys.readouterr()
+    assert code == 0
+    rep = json.loads(out.out)["imu_axes"]
+    assert rep["up"]["axis"] == "-z" and rep["up"]["confidence"] > 0.999
+    assert rep["axes_found"] is None and rep["forward"]["confidence"] < 0.99
+    code = main(["navigate", "--imu", str(d / "imu.csv"), "--gnss", str(d / "gnss.csv"),
+                 "--imu-axes", "RFU", "--out", str(tmp_path / "b.csv")])
+    err = capsys.readouterr().err
+    assert code == 0 and "up is its -z by gravity" in err and "check --imu-axes" in err
