@@ -143,3 +143,24 @@ def test_platforms_that_yaw_about_their_course_raise_no_alarm():
         sim = selfnav.simulate(kind, seed=7, duration=240)
         f = D.detect_forward_axis(sim.imu, sim.gnss.as_gnss())
         D.check_turn_gain(f, kind)
+
+
+def test_a_second_log_mounted_otherwise_is_not_read_silently(drive, tmp_path):
+    """Issue 20's complaint: a log of the same logger with the unit turned 90° on the roof, read
+    with the default (drive_0708's preset), used to be read wrongly and silently. Now the
+    GNSS accelerations say forward is the rows' +x, in one warning naming --imu-axes."""
+    from selfnav.io.readers import read_gnss
+
+    lines = (drive / "imu_1934.csv").read_text().splitlines()
+    rows = []
+    for ln in lines[1:-1]:
+        ax, ay, az, gx, gy, gz, t = ln.split(",")
+        rows.append(",".join([ay, str(-float(ax)), az, gy, str(-float(gx)), gz, t]))
+    p = _copy(drive, tmp_path, "\n".join([lines[0]] + rows + [lines[-1]]) + "\n")
+    imu = read_imu(p)
+    with warnings.catch_warnings(record=True) as w:
+        warnings.simplefilter("always")
+        rep = D.imu_axes_report(imu, read_gnss(drive / "gnss_1934_sf.pos"))
+    said = [str(x.message) for x in w if issubclass(x.category, SelfnavWarning)]
+    assert rep["agrees"] is False
+    assert len(said) == 1 and "forward is its +x" in said[0] and "--imu-axes" in said[0]
