@@ -53,6 +53,10 @@ def _as_roads(roads) -> RoadGraph | None:
     return read_roads(roads)
 
 
+#: The platforms that move along their nose (whose forward axis the GNSS accelerations show).
+_ALONG_NOSE = (None, "auto", "car", "pedestrian", "walker", "rover")
+
+
 def _check_overlap(imu: ImuData, gnss: GnssData) -> None:
     if gnss.t[-1] < imu.t[0] or gnss.t[0] > imu.t[-1]:
         raise SelfnavError(f"the GNSS times ({gnss.t[0]:.3f}…{gnss.t[-1]:.3f} s) and the IMU "
@@ -118,7 +122,8 @@ def navigate(imu: ImuData, gnss: GnssData | None, roads=None, *, method: str = "
     axes = None
     if gnss is not None:
         _check_overlap(imu, gnss)
-        axes = imu_axes_report(imu, gnss)     # gyros in deg/s or turning the other way: refused
+        # gyros in deg/s or turning the other way: refused; axes other than given: a warning
+        axes = imu_axes_report(imu, gnss, along_nose=options.get("platform") in _ALONG_NOSE)
     nav = navigator(imu, roads, smooth=smooth, **options)
     odo = None if odometer is None else odometer.shifted(0.0)
     ins.feed(nav, imu, gnss, odometer=odo, progress=progress)

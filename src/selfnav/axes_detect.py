@@ -465,14 +465,16 @@ def compare_frames(given: ImuFrame, detected: ImuFrame, *, yaw_tolerance_deg: fl
             + f" (detected axes {detected.axes.letters})")
 
 
-def imu_axes_report(imu: ImuData, gnss: GnssData) -> dict:
+def imu_axes_report(imu: ImuData, gnss: GnssData, *, along_nose: bool = True) -> dict:
     """The axes of an IMU record as read, checked against the data before a navigator runs on
     it (issue 20, part 2): the up axis from gravity (the IMU rows the GNSS overlaps), the
     forward axis from the GNSS accelerations, the gyro turn gain (:func:`check_turn_gain`:
     gyros in deg/s or turning the other way raise :class:`~selfnav.errors.InputError`).
 
     Rows read into the vehicle's RFU frame should show up ``+z`` and forward ``+y``: where a
-    confident detection says otherwise, one warning line names what was found. Rows left in
+    confident detection says otherwise, one warning line names what was found (forward only
+    ``along_nose``: a platform that moves along its nose — a drone, a boat, an aircraft may
+    fly or drift sideways). Rows left in
     the sensor's own axes (``--imu-axes detect``) are reported with the ``--imu-axes`` the
     detection reads them as. Returns the report (``up``, ``forward``, ``axes_found``,
     ``agrees``) for the solution's statistics; the rows are not changed.
@@ -494,7 +496,8 @@ def imu_axes_report(imu: ImuData, gnss: GnssData) -> dict:
     bad = []
     if up.index >= 0 and up.confidence >= 0.99 and up.axis != "+z":
         bad.append(f"up is its {up.axis} by gravity")
-    if fwd.index >= 0 and fwd.confidence >= 0.99 and up.axis == "+z" and fwd.axis != "+y":
+    if along_nose and fwd.index >= 0 and fwd.confidence >= 0.99 and up.axis == "+z" \
+            and fwd.axis != "+y":
         bad.append(f"forward is its {fwd.axis} by the GNSS accelerations")
     rep["agrees"] = not bad
     if bad:
