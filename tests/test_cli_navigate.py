@@ -99,7 +99,13 @@ def test_navigate_bad_input(sim, tmp_path, capsys):
     rad = tmp_path / "rad.csv"
     rad.write_text("t,lat_deg,lon_deg,h_m\n0,1.05,0.47,10\n1,1.05,0.47,10\n")
     code, _, err = run(["navigate", "--imu", imu, "--gnss", rad, "--out", out], capsys)
-    assert code == 2 and len(err.strip().splitlines()) == 1
+    lines = err.strip().splitlines()
+    errors = [ln for ln in lines if ln.startswith("selfnav: error:")]
+    assert code == 2 and len(errors) == 1
+    # … and one warning says why: the positions look like radians
+    assert [ln for ln in lines if ln not in errors] == [
+        ln for ln in lines if ln.startswith("selfnav: warning:") and "look like radians" in ln]
+    assert len(lines) == 2
 
 
 # ---------------------------------------------------------------- issue 12: real-world files
