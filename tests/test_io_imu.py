@@ -80,8 +80,14 @@ def test_rate_and_length_checks():
     with pytest.raises(InputError, match="has 2 samples over 0.01 s: navigate needs at least 5 s"):
         I.check_imu_rate(imu, "navigate", min_duration_s=5.0)
     coarse = ImuData(np.arange(100) * 5.0, np.zeros((100, 3)), np.tile([0, 0, 9.8], (100, 1)))
-    with pytest.raises(InputError, match="too coarse"):
+    with pytest.raises(InputError, match="too coarse.*in milliseconds"):
         I.check_imu_rate(coarse, "navigate", max_dt_s=0.2)
+    # a 100 Hz record stamped in microseconds or nanoseconds: the guess names that unit
+    for k, unit in ((1e6, "microseconds"), (1e9, "nanoseconds")):
+        stamped = ImuData(np.arange(100) * 0.01 * k, np.zeros((100, 3)),
+                          np.tile([0, 0, 9.8], (100, 1)))
+        with pytest.raises(InputError, match=f"in {unit}"):
+            I.check_imu_rate(stamped, "navigate", max_dt_s=0.2)
     mid = ImuData(np.arange(100) * 0.08, np.zeros((100, 3)), np.tile([0, 0, 9.8], (100, 1)))
     with pytest.warns(SelfnavWarning, match="coarse for navigate"):
         I.check_imu_rate(mid, "navigate", max_dt_s=0.2, warn_dt_s=0.05)

@@ -299,6 +299,15 @@ def report_gaps(imu: ImuData, max_bridge_samples: int = MAX_BRIDGE_SAMPLES) -> I
     return imu
 
 
+def _time_unit_guess(dt: float) -> str:
+    """The unit a time column of median step ``dt`` (read as seconds) is most likely in: the one
+    that makes the rate a sensor's (1 Hz to 10 kHz)."""
+    for unit, k in (("milliseconds", 1e3), ("microseconds", 1e6), ("nanoseconds", 1e9)):
+        if 1e-4 <= dt / k <= 1.0:
+            return unit
+    return "milliseconds"
+
+
 def check_imu_rate(imu: ImuData, what: str, *, min_duration_s: float = 0.0,
                    max_dt_s: float | None = None, warn_dt_s: float | None = None,
                    path=None) -> None:
@@ -318,7 +327,7 @@ def check_imu_rate(imu: ImuData, what: str, *, min_duration_s: float = 0.0,
     if max_dt_s is not None and dt > max_dt_s:
         raise InputError(path, f"median sample interval {dt:.4g} s ({1 / dt:.3g} Hz) is too coarse "
                          f"for {what} (at most {max_dt_s:g} s); is the time column in "
-                         "milliseconds?", column="t")
+                         f"{_time_unit_guess(dt)}?", column="t")
     if warn_dt_s is not None and dt > warn_dt_s:
         warn(f"{path}: median sample interval {dt:.4g} s ({1 / dt:.3g} Hz) is coarse for {what}; "
              f"expect larger errors than at {1 / warn_dt_s:.3g} Hz or more")
