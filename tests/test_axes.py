@@ -175,7 +175,8 @@ def test_navigate_reports_the_axes_it_finds(drive, tmp_path, capsys):
     """Through the command line: the drive written in FRD (its gnss.csv holds positions only,
     σ 1 m at 5 Hz), ``--imu-axes detect``: the JSON's ``imu_axes`` has up = the sensor's −z by
     gravity, and no forward axis claimed (from positions alone its yaw σ is 20°+: not found,
-    honestly); read with the wrong axes (RFU), one warning names what gravity says."""
+    honestly), so the rows are read with that up and the sideways constraint off (one
+    warning); read with the wrong axes (RFU), one warning names what gravity says."""
     import json
 
     from selfnav.cli import main
@@ -189,6 +190,9 @@ def test_navigate_reports_the_axes_it_finds(drive, tmp_path, capsys):
     rep = json.loads(out.out)["imu_axes"]
     assert rep["up"]["axis"] == "-z" and rep["up"]["confidence"] > 0.999
     assert rep["axes_found"] is None and rep["forward"]["confidence"] < 0.99
+    # the rows were read with up from gravity and the sideways constraint off, said once
+    assert rep["applied"] == rep["axes_up_only"] and A.parse_axes(rep["applied"]).matrix[2][2] == -1
+    assert "sideways constraint is off" in out.err
     code = main(["navigate", "--imu", str(d / "imu.csv"), "--gnss", str(d / "gnss.csv"),
                  "--imu-axes", "RFU", "--out", str(tmp_path / "b.csv")])
     err = capsys.readouterr().err

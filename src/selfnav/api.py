@@ -57,6 +57,28 @@ def _as_roads(roads) -> RoadGraph | None:
 _ALONG_NOSE = (None, "auto", "car", "pedestrian", "walker", "rover")
 
 
+def _in_detected_axes(imu: ImuData, rep: dict, along_nose: bool, options: dict):
+    """``--imu-axes detect``: the rows into the frame the record's own data show
+    (:func:`selfnav.axes_detect.detected_frame`; a setting found from the whole record before
+    the navigator runs, as ``--imu-axes`` would be given — the rows are causal given it). With
+    the up axis alone the forward axis is a guess, and the sideways constraint that needs it is
+    turned off (unless ``nhc`` was given), in one warning."""
+    from selfnav.axes import to_vehicle
+    from selfnav.axes_detect import detected_frame
+    from selfnav.errors import warn
+
+    src = imu.source or "IMU data"
+    frame, forward_known = detected_frame(rep, src)
+    rep["applied"] = frame.axes.letters + (f", yaw {frame.mount_deg[2]:.2f}°"
+                                           if frame.has_mount else "")
+    if not forward_known and along_nose and options.get("nhc") is None:
+        options = {**options, "nhc": False}
+        warn(f"{src}: --imu-axes detect found up (the rows read as {frame.axes.letters}) but not "
+             "forward (no GNSS velocity, or too little acceleration and turning to see it): the "
+             "sideways constraint is off; give --imu-axes for it")
+    return to_vehicle(imu, frame), options
+
+
 def _check_overlap(imu: ImuData, gnss: GnssData) -> None:
     if gnss.t[-1] < imu.t[0] or gnss.t[0] > imu.t[-1]:
         raise SelfnavError(f"the GNSS times ({gnss.t[0]:.3f}…{gnss.t[-1]:.3f} s) and the IMU "
@@ -123,7 +145,10 @@ def navigate(imu: ImuData, gnss: GnssData | None, roads=None, *, method: str = "
     if gnss is not None:
         _check_overlap(imu, gnss)
         # gyros in deg/s or turning the other way: refused; axes other than given: a warning
-        axes = imu_axes_report(imu, gnss, along_nose=options.get("platform") in _ALONG_NOSE)
+        along = options.get("platform") in _ALONG_NOSE
+        axes = imu_axes_report(imu, gnss, along_nose=along)
+        if imu.meta.get("axes") == "sensor":          # --imu-axes detect
+            imu, options = _in_detected_axes(imu, axes, along, options)
     nav = navigator(imu, roads, smooth=smooth, **options)
     odo = None if odometer is None else odometer.shifted(0.0)
     ins.feed(nav, imu, gnss, odometer=odo, progress=progress)

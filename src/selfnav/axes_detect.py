@@ -487,10 +487,13 @@ def imu_axes_report(imu: ImuData, gnss: GnssData, *, along_nose: bool = True) ->
     up = detect_up_axis(imu.f_ib_b[m] if m.sum() > 10 else imu.f_ib_b)
     fwd = detect_forward_axis(imu, gnss, up=up)
     check_turn_gain(fwd, src)
-    found = None
-    if up.index >= 0 and up.confidence >= 0.99 and fwd.index >= 0 and fwd.confidence >= 0.99:
-        found = frame_from_detection(up, fwd, yaw=False).axes.letters
-    rep = {"up": up.to_dict(), "forward": fwd.to_dict(), "axes_found": found, "agrees": None}
+    found = up_only = None
+    if up.index >= 0 and up.confidence >= 0.99:
+        up_only = frame_from_detection(up, None).axes.letters
+        if fwd.index >= 0 and fwd.confidence >= 0.99:
+            found = frame_from_detection(up, fwd, yaw=False).axes.letters
+    rep = {"up": up.to_dict(), "forward": fwd.to_dict(), "axes_found": found,
+           "axes_up_only": up_only, "agrees": None, "applied": None}
     if imu.meta.get("axes") == "sensor":
         return rep
     bad = []
@@ -507,10 +510,32 @@ def imu_axes_report(imu: ImuData, gnss: GnssData, *, along_nose: bool = True) ->
     return rep
 
 
+def detected_frame(rep: dict, source: str = "IMU data") -> tuple[ImuFrame, bool]:
+    """The frame ``--imu-axes detect`` reads a record in, from :func:`imu_axes_report`'s
+    report: the axes found and the fine yaw mounting when the forward axis was found (its σ
+    below 2°; else no yaw), or — forward not found — the up axis with the sensor axis after it
+    taken as forward (then ``False``: the caller must not trust a forward axis, e.g. turn the
+    sideways constraint off). :class:`~selfnav.errors.InputError` when not even up was found.
+    """
+    from selfnav.axes import imu_frame
+    from selfnav.errors import InputError
+
+    if rep["axes_found"]:
+        f = rep["forward"]
+        yaw = f["yaw_mount_deg"] if f["sigma_yaw_deg"] < 2.0 else 0.0
+        return replace(imu_frame(rep["axes_found"], (0.0, 0.0, yaw)), source="detected"), True
+    if rep["axes_up_only"]:
+        return replace(imu_frame(rep["axes_up_only"]), source="detected"), False
+    raise InputError(source, "--imu-axes detect: no up axis found (the mean specific force is "
+                     f"not gravity: {rep['up']['gravity_ratio']:.3g} g, or too scattered); give "
+                     "--imu-axes")
+
+
 def _axis_of(row) -> str:
     j = int(np.flatnonzero(row)[0])
     return axis_label(j, int(row[j]))
 
 
 __all__ = ["ForwardAxis", "UpAxis", "check_turn_gain", "compare_frames", "detect_forward_axis",
-           "detect_up_axis", "frame_from_detection", "gnss_velocity_n", "imu_axes_report"]
+           "detect_up_axis", "detected_frame", "frame_from_detection", "gnss_velocity_n",
+           "imu_axes_report"]

@@ -121,9 +121,9 @@ ImuAxes = Annotated[Optional[str], typer.Option(
     "--imu-axes", metavar="AXES", callback=check_axes,
     help="What the IMU file's x, y, z point to: three letters of R L F B U D (right, left, "
          "forward, back, up, down; NED reads as FRD), e.g. FRD, RFU, FLU, or x=-F,y=R,z=U; a "
-         "preset (" + ", ".join(AXES_PRESETS) + "); or detect (left as the file has them; "
-         "navigate reports the axes it finds, imu_axes in --json, and does not rotate the rows). "
-         "Default: the format's documented axes (docs/readers.md).")]
+         "preset (" + ", ".join(AXES_PRESETS) + "); or detect (navigate finds them from gravity "
+         "and the GNSS accelerations before it runs, imu_axes in --json; up alone: the sideways "
+         "constraint off). Default: the format's documented axes (docs/readers.md).")]
 ImuMount = Annotated[Optional[str], typer.Option(
     "--imu-mount", metavar="R,P,Y", callback=check_mount,
     help="Roll, pitch, yaw of the IMU on the vehicle, deg (DESIGN §2 conventions: yaw "
