@@ -188,3 +188,23 @@ def test_imu_axes_detect_navigates_the_real_drive(drive):
     d = enu_offset(np.interp(tr.t[m], gnss.t, gnss.lat), np.interp(tr.t[m], gnss.t, gnss.lon),
                    0.0, tr.lat[m], tr.lon[m], 0.0)
     assert np.sqrt(np.mean(d[:, 0] ** 2 + d[:, 1] ** 2)) < 0.05
+
+
+def test_deg_per_s_gyros_with_noisy_fixes_are_refused_by_the_sideways_acceleration():
+    """Simulated car (10 m fixes at 1 Hz, a Gauss–Markov outlier window): the course is too noisy
+    for the turn gain to decide (R² ≈ 0), but its gyros in deg/s ask 5 g sideways at over 5 m/s
+    (a car's corners: 0.1-0.4 g here): refused. Rad/s: no error."""
+    import selfnav
+    from selfnav.types import ImuData
+
+    sim = selfnav.simulate("car", seed=3, duration=200)
+    gnss = sim.gnss.as_gnss()
+    f = D.detect_forward_axis(sim.imu, gnss)
+    assert f.lateral_g95 < 1.0
+    D.check_turn_gain(f, "car", along_nose=True)
+    deg = ImuData(sim.imu.t, np.degrees(sim.imu.omega_ib_b), sim.imu.f_ib_b, source="deg.csv")
+    f = D.detect_forward_axis(deg, gnss)
+    assert f.lateral_g95 > 3.0
+    with pytest.raises(InputError, match="look like deg/s"):
+        D.check_turn_gain(f, "deg.csv", along_nose=True)
+    D.check_turn_gain(f, "deg.csv", along_nose=False)      # a drone may spin: no verdict

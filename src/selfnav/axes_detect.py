@@ -155,6 +155,10 @@ class ForwardAxis:
         1σ and the share of the course rate's variance it explains: ≈ 1 for gyros in rad/s,
         ≈ 1/57.3 for deg/s read as rad/s, ≈ −1 for gyros turning the other way
         (:func:`check_turn_gain`); NaN without turns.
+    lateral_g95 : float
+        95th percentile, over the epochs at 5-40 m/s, of the sideways acceleration the gyro
+        rate implies for a vehicle that turns where it points (speed × rate about up), in g;
+        NaN with fewer than 20 such epochs.
     """
 
     axis: str
@@ -172,6 +176,7 @@ class ForwardAxis:
     turn_gain: float = float("nan")
     sigma_turn_gain: float = float("nan")
     turn_r2: float = float("nan")
+    lateral_g95: float = float("nan")
 
     def to_dict(self) -> dict:
         return {"axis": self.axis, "yaw_mount_deg": math.degrees(self.yaw_mount_rad),
@@ -179,7 +184,7 @@ class ForwardAxis:
                 "along_gain": self.along_gain, "lateral_gain": self.lateral_gain,
                 "handed": self.handed, "turn_correlation": self.turn_correlation,
                 "turn_gain": self.turn_gain, "sigma_turn_gain": self.sigma_turn_gain,
-                "turn_r2": self.turn_r2,
+                "turn_r2": self.turn_r2, "lateral_g95": self.lateral_g95,
                 "epochs": self.epochs}
 
 
@@ -289,7 +294,13 @@ def detect_forward_axis(imu: ImuData, gnss: GnssData, *, up: UpAxis | None = Non
         corr = float(np.corrcoef(chi_rate[ok], turn[ok])[0, 1])
     # the course's noise falls with the speed: the gain weighted by its square
     gain, sig_gain_turn, r2 = _turn_gain(chi_rate[ok], turn[ok], s_mid[ok] ** 2, 2.0 * k)
-    empty = replace(empty, turn_gain=gain, sigma_turn_gain=sig_gain_turn, turn_r2=r2)
+    # (below 40 m/s: an outlier differenced into a speed of 50-100 m/s, times a parking turn,
+    # would ask g's of a car that stands)
+    fast = ok & (s_mid > 5.0) & (s_mid < 40.0)
+    lat_g = (float(np.percentile(s_mid[fast] * np.abs(turn[fast]), 95)) / G0
+             if fast.sum() >= 20 else float("nan"))
+    empty = replace(empty, turn_gain=gain, sigma_turn_gain=sig_gain_turn, turn_r2=r2,
+                    lateral_g95=lat_g)
     if ok.sum() < 8:
         return replace(empty, turn_correlation=corr, epochs=int(ok.sum()))
     # basis of the plane perpendicular to up
@@ -346,7 +357,8 @@ def detect_forward_axis(imu: ImuData, gnss: GnssData, *, up: UpAxis | None = Non
     if gain_f < 3.0 * sig_gain:
         conf = 0.0                                      # no along-track acceleration to see
     return ForwardAxis(axis_label(best, sgn), best, sgn, F, yaw, float(sig_perp), float(conf),
-                       gain_f, gain_r, handed, corr, int(ok.sum()), gain, sig_gain_turn, r2)
+                       gain_f, gain_r, handed, corr, int(ok.sum()), gain, sig_gain_turn, r2,
+                       lat_g)
 
 
 def _turn_gain(chi_rate, turn, weight, inflation):
@@ -381,16 +393,27 @@ TURN_GAIN_MAX_SIGMA = 0.1
 TURN_GAIN_Z = 4.0
 TURN_GAIN_REFUTE_Z = 10.0
 TURN_GAIN_MIN_R2 = 0.25
+#: Sideways acceleration (g) a vehicle turning where it points cannot hold on 5 % of its epochs
+#: at 5-40 m/s (a car's corners: under 1 g; gyros in deg/s read as rad/s: ×57)
+MAX_LATERAL_G95 = 3.0
 
 
-def check_turn_gain(fwd: "ForwardAxis", source: str = "IMU data") -> None:
+def check_turn_gain(fwd: "ForwardAxis", source: str = "IMU data", *,
+                    along_nose: bool = False) -> None:
     """Raise :class:`~selfnav.errors.InputError` when the gyros turn decisively unlike the GNSS
     track: 57.3× faster (deg/s read as rad/s) or the other way (gyro signs flipped against the
     accelerometers', latitude and longitude swapped: the up axis comes from gravity, so an axis
     negated in both sensors does not flip it). Nothing when there is too little turning to
-    tell, or the gain is near 1."""
+    tell, or the gain is near 1. ``along_nose`` (a car, a walker, a rover: it turns where it
+    points): gyro rates that, times the GNSS speed, ask more than 3 g sideways on 5 % of the
+    epochs at 5-40 m/s are deg/s too, however noisy the course (the gain undecided).
+    """
     from selfnav.errors import InputError
 
+    if along_nose and fwd.lateral_g95 > MAX_LATERAL_G95:
+        raise InputError(source, f"at over 5 m/s the gyro rate about up asks {fwd.lateral_g95:.3g} "
+                         "g sideways (95th percentile; a car's corners stay under 1 g): the gyros "
+                         "look like deg/s, the file needs rad/s")
     g, sg = fwd.turn_gain, fwd.sigma_turn_gain
     if not (np.isfinite(g) and np.isfinite(sg)) or sg > TURN_GAIN_MAX_SIGMA:
         return
@@ -486,7 +509,7 @@ def imu_axes_report(imu: ImuData, gnss: GnssData, *, along_nose: bool = True) ->
     m = (t >= gnss.t[0]) & (t <= gnss.t[-1])
     up = detect_up_axis(imu.f_ib_b[m] if m.sum() > 10 else imu.f_ib_b)
     fwd = detect_forward_axis(imu, gnss, up=up)
-    check_turn_gain(fwd, src)
+    check_turn_gain(fwd, src, along_nose=along_nose)
     found = up_only = None
     if up.index >= 0 and up.confidence >= 0.99:
         up_only = frame_from_detection(up, None).axes.letters
