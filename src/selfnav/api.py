@@ -12,8 +12,9 @@ import warnings
 import numpy as np
 
 from selfnav import ins
-from selfnav.axes_detect import imu_axes_report
-from selfnav.errors import SelfnavError, SelfnavWarning
+from selfnav.axes import to_vehicle
+from selfnav.axes_detect import detected_frame, imu_axes_report
+from selfnav.errors import SelfnavError, SelfnavWarning, warn
 from selfnav.evaluation import evaluate as _evaluate_trajectories
 from selfnav.evaluation import load_road_polylines
 from selfnav.io.attitude_file import read_attitude
@@ -63,10 +64,6 @@ def _in_detected_axes(imu: ImuData, rep: dict, along_nose: bool, options: dict):
     the navigator runs, as ``--imu-axes`` would be given — the rows are causal given it). With
     the up axis alone the forward axis is a guess, and the sideways constraint that needs it is
     turned off (unless ``nhc`` was given), in one warning."""
-    from selfnav.axes import to_vehicle
-    from selfnav.axes_detect import detected_frame
-    from selfnav.errors import warn
-
     src = imu.source or "IMU data"
     frame, forward_known = detected_frame(rep, src)
     rep["applied"] = frame.axes.letters + (f", yaw {frame.mount_deg[2]:.2f}°"

@@ -421,7 +421,7 @@ def check_turn_gain(fwd: "ForwardAxis", source: str = "IMU data", *,
         return
     if abs(g - 1.0) <= TURN_GAIN_REFUTE_Z * sg:
         return
-    if abs(g - 1.0 / math.degrees(1.0)) <= TURN_GAIN_Z * max(sg, 1e-3):
+    if abs(g - math.radians(1.0)) <= TURN_GAIN_Z * max(sg, 1e-3):      # deg/s read as rad/s
         raise InputError(source, f"the GNSS track turns {g:.4f} ± {sg:.4f} rad per radian the "
                          f"gyros turn ({fwd.epochs} epochs; 1/57.3 = 0.0175 for gyros in "
                          "deg/s): they look like deg/s, the file needs rad/s")
@@ -497,10 +497,11 @@ def imu_axes_report(imu: ImuData, gnss: GnssData, *, along_nose: bool = True) ->
     Rows read into the vehicle's RFU frame should show up ``+z`` and forward ``+y``: where a
     confident detection says otherwise, one warning line names what was found (forward only
     ``along_nose``: a platform that moves along its nose — a drone, a boat, an aircraft may
-    fly or drift sideways). Rows left in
-    the sensor's own axes (``--imu-axes detect``) are reported with the ``--imu-axes`` the
-    detection reads them as. Returns the report (``up``, ``forward``, ``axes_found``,
-    ``agrees``) for the solution's statistics; the rows are not changed.
+    fly or drift sideways). Rows left in the sensor's own axes (``--imu-axes detect``) are
+    reported with the axes the detection reads them as (:func:`detected_frame` turns the
+    report into a frame). Returns the report (``up``, ``forward``, ``axes_found``,
+    ``axes_up_only``, ``agrees``, ``applied``) for the solution's statistics; the rows are not
+    changed here.
     """
     from selfnav.errors import warn
 

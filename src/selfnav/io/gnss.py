@@ -13,7 +13,7 @@ from selfnav.errors import InputError, SelfnavWarning
 from selfnav.io.csvio import open_text
 from selfnav.io.fleet import (build_tracks, merged_note, read_columns,  # noqa: F401
                               to_wgs84)
-from selfnav.io.nmea_rmc import checksum_ok
+from selfnav.io.nmea_rmc import checksum_ok, nmea_sentences
 from selfnav.types import GnssData
 
 #: GPS time origin 1980-01-06 in Unix-like seconds; GPS week seconds are counted from a Sunday.
@@ -145,15 +145,7 @@ def read_nmea(path) -> GnssData:
     """
     path = Path(path)
     text = open_text(path)
-    gga = []                                        # (line index, sentence)
-    for i, ln in enumerate(text.splitlines()):
-        s = ln.strip()
-        j = s.find("$")
-        if j < 0:
-            continue
-        s = s[j:]                                   # a logger's time stamp before the sentence
-        if s[1:].split(",")[0][2:] == "GGA":
-            gga.append((i, s))
+    gga = list(nmea_sentences(text, "GGA"))
     # a sentence cut short where the others carry a checksum: the logger stopped mid-line
     if len(gga) >= 2 and "*" not in gga[-1][1] and "*" in gga[-2][1]:
         warnings.warn(f"{path}: line {gga[-1][0] + 1} is a partial GGA sentence (the logger "
@@ -161,11 +153,10 @@ def read_nmea(path) -> GnssData:
         gga = gga[:-1]
     t, lat, lon, h, sig, q = [], [], [], [], [], []
     bad_sum = []
-    for i, s in gga:
+    for i, s, f in gga:
         if checksum_ok(s) is False:
             bad_sum.append(i + 1)
             continue
-        f = s[1:].split("*")[0].split(",")
         if len(f) < 12:
             raise InputError(path, f"GGA sentence with {len(f)} fields (15 expected)", row=i + 1)
         if not f[6] or f[6] == "0" or not f[2] or not f[4]:

@@ -89,6 +89,21 @@ def checksum_ok(s: str) -> bool | None:
     return x == want
 
 
+def nmea_sentences(text: str, kind: str):
+    """``(line index, sentence from its $, fields before the checksum)`` of every ``kind``
+    sentence (``"RMC"``, ``"GGA"``; any talker) of an NMEA log, a logger's time stamp before
+    the ``$`` tolerated."""
+    for i, ln in enumerate(text.splitlines()):
+        s = ln.strip()
+        j = s.find("$")
+        if j < 0:
+            continue
+        s = s[j:]
+        f = s[1:].split("*")[0].split(",")
+        if len(f[0]) >= 5 and f[0][-3:] == kind:
+            yield i, s, f
+
+
 def _deg(v: str, hemi: str, ndeg: int) -> float:
     """``ddmm.mmmm`` / ``dddmm.mmmm`` → signed degrees."""
     k = v.index(".") if "." in v else len(v)
@@ -130,15 +145,7 @@ def read_nmea_rmc(path) -> RmcData:
     path = Path(path)
     text = open_text(path)
     rows, rejected = [], {}
-    for i, ln in enumerate(text.splitlines()):
-        s = ln.strip()
-        j = s.find("$")
-        if j < 0:
-            continue
-        s = s[j:]  # tolerate a logger's time stamp before the sentence
-        f = s[1:].split("*")[0].split(",")
-        if len(f[0]) < 5 or f[0][-3:] != "RMC":
-            continue
+    for i, s, f in nmea_sentences(text, "RMC"):
         ok = checksum_ok(s)
         if ok is False:
             rejected["checksum"] = rejected.get("checksum", 0) + 1
