@@ -140,6 +140,25 @@ def test_code_smoothing_bridges_a_step_on_one_satellite():
     assert np.median(d) < 3.0 and d.max() < 6.0
 
 
+def test_code_smoothing_gives_back_a_slow_ramp_it_had_taken_in():
+    """A ramp of 0.5 m/s on one satellite's code for 60 s, below the single-epoch test: the
+    CUSUM finds it within 30 s and the range coasts from where the drift began, so what the
+    smoother had absorbed is given back (the mean test alone: 36 s, 7.3 m at the ramp's end)."""
+    def record():
+        return simulate_gnss(np.arange(300.0), RX, None, SatSimConfig(seed=4))[0].obs
+
+    clean_pr, _, clean_coast = smooth_code(record(), 30.0)
+    o = record()
+    m = (o.system == GPS) & (o.prn == o.prn[0]) & (o.t >= o.t[0] + 100) & (o.t < o.t[0] + 160)
+    o.pseudorange[m] += 0.5 * (o.t[m] - o.t[0] - 100)
+    pr, n, coasting = smooth_code(o, 30.0)
+    assert o.t[m][np.argmax(coasting[m])] - o.t[0] - 100 < 30.0
+    d = pr[m] - clean_pr[m]
+    assert abs(d[-1]) < 3.0 and np.abs(d).max() < 5.0
+    _, _, old = smooth_code(o, 30.0, cusum_h=np.inf)       # the mean test alone
+    assert o.t[m][np.argmax(old[m])] - o.t[0] - 100 > 30.0
+
+
 def test_reader_errors_are_one_line(tmp_path):
     p = tmp_path / "x.txt"
     p.write_text("hello\n")

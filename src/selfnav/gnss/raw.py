@@ -21,6 +21,7 @@ causal variance factor of the past residuals, so the χ² tests and the σ follo
 """
 from __future__ import annotations
 
+import math
 import warnings
 from dataclasses import dataclass, field, replace
 
@@ -121,7 +122,7 @@ def select_signals(obs: GnssObservations, systems) -> np.ndarray:
 
 
 def smooth_code(obs: GnssObservations, tau_s: float = 30.0, jump_sigma: float = 4.0,
-                coast_s: float = 120.0):
+                coast_s: float = 120.0, cusum_k: float = 0.5, cusum_h: float = 8.0):
     """Doppler-aided code smoothing (the Hatch (1982) filter with the integrated Doppler in
     place of the carrier phase), causal, per satellite and signal::
 
@@ -135,14 +136,20 @@ def smooth_code(obs: GnssObservations, tau_s: float = 30.0, jump_sigma: float = 
     **Code faults.** When a pseudorange departs from its prediction by more than
     ``jump_sigma · s`` (``s`` the satellite's running σ of ``ρ − p``, started from the
     receiver's σ or 5 m, updated slowly with the differences clipped at 3 s so that a ramp
-    does not widen its own test), or when the mean of its last ``M = 10`` differences
-    exceeds ``jump_sigma · s / √M`` (a ramp: a few metres of drift against the Doppler,
-    below the single-epoch test), the code is not used and the range coasts on the Doppler
-    (``ρ̂_k = p_k``) for up to ``coast_s``: a step, or a ramp faster than the smoother follows,
-    on one satellite's code is bridged by its own Doppler; after ``coast_s`` of disagreement
-    the code is taken again (restart, ``N = 1``). A gap (over 3 median intervals) or a missing Doppler
-    restarts too. Returns the smoothed pseudoranges, ``N`` and a flag per observation (True:
-    the code was not used, coasting).
+    does not widen its own test), when the mean of its last ``M = 10`` differences
+    exceeds ``jump_sigma · s / √M``, or when a two-sided CUSUM of ``(ρ − p)/s`` (Page 1954;
+    reference ``cusum_k``, threshold ``cusum_h``) signals a ramp — a few metres of drift
+    against the Doppler, below both tests, that the smoother would otherwise absorb (a phone's
+    6 m code noise let a 0.5 m/s ramp on two satellites run 27 s and put 7 m into the
+    smoothed ranges before the mean test fired) —, the code is not used and the range coasts
+    on the Doppler for up to ``coast_s``. A CUSUM alarm **rewinds**: the range coasts from the
+    smoothed range of the epoch where the CUSUM last stood at zero (where the drift began)
+    carried by the Doppler since, so what the smoother took in of the ramp is given back. A
+    step, or a ramp, on one satellite's code is bridged by its own Doppler; the code is taken
+    again when it agrees with the Doppler once more (restart of the CUSUM), or after
+    ``coast_s`` of disagreement (restart, ``N = 1``). A gap (over 3 median intervals) or a
+    missing Doppler restarts too. Returns the smoothed pseudoranges, ``N`` and a flag per
+    observation (True: the code was not used, coasting).
     """
     pr = obs.pseudorange.copy()
     N = np.ones(len(obs))
@@ -159,6 +166,8 @@ def smooth_code(obs: GnssObservations, tau_s: float = 30.0, jump_sigma: float = 
     bounds = np.searchsorted(ep[order], np.arange(len(t_ep) + 1))
     state: dict = {}          # key -> [ρ̂, N, s², t, ρ̇, coasting since (t) or None]
     recent: dict = {}         # key -> the last M code − prediction differences
+    cusum: dict = {}          # key -> [g+, g−, ρ̂ where g+ was last 0, … g−, the Doppler's
+                              #         range change since each, N there for each]
     M = 10
     for e in range(len(t_ep)):
         rows = order[bounds[e]:bounds[e + 1]]
@@ -184,7 +193,19 @@ def smooth_code(obs: GnssObservations, tau_s: float = 30.0, jump_sigma: float = 
             hist.append(dd)
             del hist[:-M]
             drifting = len(hist) == M and (sum(hist) / M) ** 2 > jump_sigma**2 * st[2] / M
-            if dd * dd > jump_sigma**2 * st[2] or drifting:
+            cu = cusum.get(keys[i])
+            if cu is None:
+                cu = cusum[keys[i]] = [0.0, 0.0, st[0], st[0], 0.0, 0.0, st[1], st[1]]
+            inc = p - st[0]                           # the Doppler's range change (+ clock)
+            z = dd / math.sqrt(st[2])
+            cu[0], cu[4] = max(0.0, cu[0] + z - cusum_k), cu[4] + inc
+            cu[1], cu[5] = max(0.0, cu[1] - z - cusum_k), cu[5] + inc
+            side = 0 if cu[0] > cu[1] else 1
+            ramp = st[5] is None and cu[side] > cusum_h
+            if ramp and cu[6 + side] >= 0.5 * nmax:   # from where the drift began, if the
+                # smoother had settled there (an early range carries the raw code's noise)
+                p = cu[2 + side] + cu[4 + side]
+            if dd * dd > jump_sigma**2 * st[2] or drifting or ramp:
                 since = st[5] if st[5] is not None else obs.t[i]
                 if obs.t[i] - since < coast_s:        # coast on the Doppler
                     pr[i], N[i], coasting[i] = p, st[1], True
@@ -196,11 +217,17 @@ def smooth_code(obs: GnssObservations, tau_s: float = 30.0, jump_sigma: float = 
             n = min(st[1] + 1.0, nmax)
             pr[i] = pr[i] / n + (1.0 - 1.0 / n) * p
             N[i] = n
+            if st[5] is not None:                     # the code agrees again: a fresh CUSUM
+                cu[:] = [0.0, 0.0, pr[i], pr[i], 0.0, 0.0, n, n]
+            for side in (0, 1):                       # the last smoothed range at zero
+                if cu[side] == 0.0:
+                    cu[2 + side], cu[4 + side], cu[6 + side] = pr[i], 0.0, n
             state[keys[i]] = [pr[i], n, st[2], obs.t[i], rr[i], None]
             done.add(i)
         for i in rows:
             if i not in done:
                 recent.pop(keys[i], None)
+                cusum.pop(keys[i], None)
                 st = state.get(keys[i])
                 s2 = st[2] if st is not None else 2.0 * sig0[i] ** 2
                 state[keys[i]] = [pr[i], 1.0, s2, obs.t[i], rr[i], None]
