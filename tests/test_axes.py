@@ -197,3 +197,29 @@ def test_navigate_reports_the_axes_it_finds(drive, tmp_path, capsys):
                  "--imu-axes", "RFU", "--out", str(tmp_path / "b.csv")])
     err = capsys.readouterr().err
     assert code == 0 and "up is its -z by gravity" in err and "check --imu-axes" in err
+
+
+def test_gnss_outliers_do_not_decide_the_gyro_check():
+    """A minute of 200 m white outliers in 1 m fixes at 5 Hz: differenced into speeds of
+    100 m/s, they weighed thousands of clean epochs in the turn gain (weights ∝ speed²) and
+    fitted it to −0.78 ± 0.09 — "gyro signs flipped", exit 2 (a simulated map drive of the
+    issue-19 campaign with a drifting receiver was refused so). Epochs with accelerations no
+    vehicle has are left out and no epoch weighs more than one at twice the median speed: the
+    gain is 1 (or undecided), and the same drive with its gyros negated is still refused."""
+    import dataclasses
+
+    from selfnav.errors import InputError
+
+    for seed in (2, 3):
+        sim = simulate({"scenario": {"kind": "car", "duration": 240.0},
+                        "gnss": {"sigma_m": 1.0, "rate_hz": 5.0, "spike_rate": 0.0,
+                                 "outliers": [{"start": 150.0, "duration": 60.0,
+                                               "sigma_m": 200.0, "kind": "white"}]}}, seed=seed)
+        g = sim.gnss.as_gnss()
+        f = D.detect_forward_axis(sim.imu, g)
+        D.check_turn_gain(f, "imu.csv", along_nose=True)
+        assert abs(f.turn_gain - 1.0) < 4 * f.sigma_turn_gain
+        if seed == 2:
+            flip = dataclasses.replace(sim.imu, omega_ib_b=-np.asarray(sim.imu.omega_ib_b))
+            with pytest.raises(InputError, match="turn one way"):
+                D.check_turn_gain(D.detect_forward_axis(flip, g), "imu.csv", along_nose=True)

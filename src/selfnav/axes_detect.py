@@ -159,6 +159,10 @@ class ForwardAxis:
         95th percentile, over the epochs at 5-40 m/s, of the sideways acceleration the gyro
         rate implies for a vehicle that turns where it points (speed × rate about up), in g;
         NaN with fewer than 20 such epochs.
+    turn_gain_one_blocks : int
+        Stretches of :data:`TURN_GAIN_BLOCK_S` where the gain, fitted on that stretch alone, is
+        decided and 1: the gyros are right there, whatever the whole record's fit says (a
+        GNSS fault — a drift, a drag — turns the track for minutes, not the gyros).
     """
 
     axis: str
@@ -177,6 +181,7 @@ class ForwardAxis:
     sigma_turn_gain: float = float("nan")
     turn_r2: float = float("nan")
     lateral_g95: float = float("nan")
+    turn_gain_one_blocks: int = 0
 
     def to_dict(self) -> dict:
         return {"axis": self.axis, "yaw_mount_deg": math.degrees(self.yaw_mount_rad),
@@ -185,7 +190,7 @@ class ForwardAxis:
                 "handed": self.handed, "turn_correlation": self.turn_correlation,
                 "turn_gain": self.turn_gain, "sigma_turn_gain": self.sigma_turn_gain,
                 "turn_r2": self.turn_r2, "lateral_g95": self.lateral_g95,
-                "epochs": self.epochs}
+                "turn_gain_one_blocks": self.turn_gain_one_blocks, "epochs": self.epochs}
 
 
 def gnss_velocity_n(gnss: GnssData) -> tuple[np.ndarray, np.ndarray]:
@@ -292,15 +297,28 @@ def detect_forward_axis(imu: ImuData, gnss: GnssData, *, up: UpAxis | None = Non
     corr = float("nan")
     if ok.sum() > 5 and np.std(chi_rate[ok]) > 1e-3 and np.std(turn[ok]) > 0:
         corr = float(np.corrcoef(chi_rate[ok], turn[ok])[0, 1])
-    # the course's noise falls with the speed: the gain weighted by its square
-    gain, sig_gain_turn, r2 = _turn_gain(chi_rate[ok], turn[ok], s_mid[ok] ** 2, 2.0 * k)
+    # the course's noise falls with the speed: the gain weighted by its square — over the
+    # epochs whose GNSS accelerations a vehicle can have (outliers differenced into speeds of
+    # 100 m/s weigh 10⁴ and took a simulated map drive's gain to −1: refused, exit 2)
+    fit = ok & (np.abs(a_al) < MAX_GNSS_ACCEL) & (np.abs(a_lat) < MAX_GNSS_ACCEL)
+    # ... and no epoch weighs more than one at twice the median speed (a fault that passes
+    # the test above still reads fast: at 137 m/s it weighed 300 clean epochs)
+    w_fit = np.minimum(s_mid, 2.0 * float(np.median(s_mid[fit])) if fit.any() else 0.0) ** 2
+    gain, sig_gain_turn, r2 = _turn_gain(chi_rate[fit], turn[fit], w_fit[fit], 2.0 * k)
+    ones = 0
+    block = np.floor((tg[i] - tg[0]) / TURN_GAIN_BLOCK_S)
+    for b in np.unique(block[fit]):
+        sel = fit & (block == b)
+        gb, sb, rb = _turn_gain(chi_rate[sel], turn[sel], w_fit[sel], 2.0 * k)
+        ones += bool(sb <= TURN_GAIN_MAX_SIGMA and rb >= TURN_GAIN_MIN_R2 and
+                     abs(gb - 1.0) <= TURN_GAIN_Z * sb)
     # (below 40 m/s: an outlier differenced into a speed of 50-100 m/s, times a parking turn,
     # would ask g's of a car that stands)
     fast = ok & (s_mid > 5.0) & (s_mid < 40.0)
     lat_g = (float(np.percentile(s_mid[fast] * np.abs(turn[fast]), 95)) / G0
              if fast.sum() >= 20 else float("nan"))
     empty = replace(empty, turn_gain=gain, sigma_turn_gain=sig_gain_turn, turn_r2=r2,
-                    lateral_g95=lat_g)
+                    lateral_g95=lat_g, turn_gain_one_blocks=ones)
     if ok.sum() < 8:
         return replace(empty, turn_correlation=corr, epochs=int(ok.sum()))
     # basis of the plane perpendicular to up
@@ -393,6 +411,14 @@ TURN_GAIN_MAX_SIGMA = 0.1
 TURN_GAIN_Z = 4.0
 TURN_GAIN_REFUTE_Z = 10.0
 TURN_GAIN_MIN_R2 = 0.25
+#: s: the stretches fitted alone (``ForwardAxis.turn_gain_one_blocks``); a gain decided and 1
+#: on one of them clears the gyros (a simulated map drive with a receiver drifting for its
+#: first 284 s fitted −0.97 ± 0.08 over the whole record and was refused as gyro signs
+#: flipped, exit 2; its clean stretch after the drift turns as one)
+TURN_GAIN_BLOCK_S = 60.0
+#: m/s²: GNSS accelerations (along, sideways) beyond this are a fault differenced into the
+#: track, not the vehicle (1.5 g; the turn gain is fitted without them)
+MAX_GNSS_ACCEL = 15.0
 #: Sideways acceleration (g) a vehicle turning where it points cannot hold on 5 % of its epochs
 #: at 5-40 m/s (a car's corners: under 1 g; gyros in deg/s read as rad/s: ×57)
 MAX_LATERAL_G95 = 3.0
@@ -404,7 +430,8 @@ def check_turn_gain(fwd: "ForwardAxis", source: str = "IMU data", *,
     track: 57.3× faster (deg/s read as rad/s) or the other way (gyro signs flipped against the
     accelerometers', latitude and longitude swapped: the up axis comes from gravity, so an axis
     negated in both sensors does not flip it). Nothing when there is too little turning to
-    tell, or the gain is near 1. ``along_nose`` (a car, a walker, a rover: it turns where it
+    tell, or the gain is near 1 — over the record or on one stretch of it
+    (``turn_gain_one_blocks``: a GNSS fault turns the track for minutes). ``along_nose`` (a car, a walker, a rover: it turns where it
     points): gyro rates that, times the GNSS speed, ask more than 3 g sideways on 5 % of the
     epochs at 5-40 m/s are deg/s too, however noisy the course (the gain undecided).
     """
@@ -416,6 +443,8 @@ def check_turn_gain(fwd: "ForwardAxis", source: str = "IMU data", *,
                          "look like deg/s, the file needs rad/s")
     g, sg = fwd.turn_gain, fwd.sigma_turn_gain
     if not (np.isfinite(g) and np.isfinite(sg)) or sg > TURN_GAIN_MAX_SIGMA:
+        return
+    if fwd.turn_gain_one_blocks > 0:        # the gyros turn as the track where it is clean
         return
     if not fwd.turn_r2 >= TURN_GAIN_MIN_R2:
         return
