@@ -431,9 +431,10 @@ def check_turn_gain(fwd: "ForwardAxis", source: str = "IMU data", *,
     accelerometers', latitude and longitude swapped: the up axis comes from gravity, so an axis
     negated in both sensors does not flip it). Nothing when there is too little turning to
     tell, or the gain is near 1 — over the record or on one stretch of it
-    (``turn_gain_one_blocks``: a GNSS fault turns the track for minutes). ``along_nose`` (a car, a walker, a rover: it turns where it
-    points): gyro rates that, times the GNSS speed, ask more than 3 g sideways on 5 % of the
-    epochs at 5-40 m/s are deg/s too, however noisy the course (the gain undecided).
+    (``turn_gain_one_blocks``: a GNSS fault turns the track for minutes). ``along_nose`` (a
+    car, a walker, a rover: it turns where it points): gyro rates that, times the GNSS speed,
+    ask more than 3 g sideways on 5 % of the epochs at 5-40 m/s are deg/s too, however noisy
+    the course (the gain undecided).
     """
     from selfnav.errors import InputError
 
