@@ -269,7 +269,7 @@ class EkfRoadAid:
         vertex above 20° near), m (None: none, the default: at 2 m it was worse on the 40
         tuning drives, pooled along/cross 60.6 / 48.6 m against 56.3 / 44.5 m, 12 drives more
         than 20 s off the route against 8; with the causal navigator, stop 54: better on the
-        tuning seed, 17 → 14 drives, 51.4 / 55.1 → 44.9 / 46.1 m, but on master seed 2 35 → 35
+        tuning seed, 17 → 14 drives, 51.4 / 55.1 → 44.9 / 46.1 m, but on master seed 2 36 → 35
         drives, 17 better and 13 worse by more than 1 m — not a default)
     """
 
