@@ -310,8 +310,7 @@ def detect_forward_axis(imu: ImuData, gnss: GnssData, *, up: UpAxis | None = Non
     for b in np.unique(block[fit]):
         sel = fit & (block == b)
         gb, sb, rb = _turn_gain(chi_rate[sel], turn[sel], w_fit[sel], 2.0 * k)
-        ones += bool(sb <= TURN_GAIN_MAX_SIGMA and rb >= TURN_GAIN_MIN_R2 and
-                     abs(gb - 1.0) <= TURN_GAIN_Z * sb)
+        ones += bool(_gain_decided(sb, rb) and abs(gb - 1.0) <= TURN_GAIN_Z * sb)
     # (below 40 m/s: an outlier differenced into a speed of 50-100 m/s, times a parking turn,
     # would ask g's of a car that stands)
     fast = ok & (s_mid > 5.0) & (s_mid < 40.0)
@@ -424,6 +423,12 @@ MAX_GNSS_ACCEL = 15.0
 MAX_LATERAL_G95 = 3.0
 
 
+def _gain_decided(sigma, r2) -> bool:
+    """A turn gain is sure enough to say something: σ within :data:`TURN_GAIN_MAX_SIGMA` and
+    the fit explaining :data:`TURN_GAIN_MIN_R2` of the course's turning (False for NaN)."""
+    return bool(sigma <= TURN_GAIN_MAX_SIGMA and r2 >= TURN_GAIN_MIN_R2)
+
+
 def check_turn_gain(fwd: "ForwardAxis", source: str = "IMU data", *,
                     along_nose: bool = False) -> None:
     """Raise :class:`~selfnav.errors.InputError` when the gyros turn decisively unlike the GNSS
@@ -443,11 +448,9 @@ def check_turn_gain(fwd: "ForwardAxis", source: str = "IMU data", *,
                          "g sideways (95th percentile; a car's corners stay under 1 g): the gyros "
                          "look like deg/s, the file needs rad/s")
     g, sg = fwd.turn_gain, fwd.sigma_turn_gain
-    if not (np.isfinite(g) and np.isfinite(sg)) or sg > TURN_GAIN_MAX_SIGMA:
+    if not (np.isfinite(g) and _gain_decided(sg, fwd.turn_r2)):
         return
     if fwd.turn_gain_one_blocks > 0:        # the gyros turn as the track where it is clean
-        return
-    if not fwd.turn_r2 >= TURN_GAIN_MIN_R2:
         return
     if abs(g - 1.0) <= TURN_GAIN_REFUTE_Z * sg:
         return

@@ -166,8 +166,8 @@ def smooth_code(obs: GnssObservations, tau_s: float = 30.0, jump_sigma: float = 
     bounds = np.searchsorted(ep[order], np.arange(len(t_ep) + 1))
     state: dict = {}          # key -> [ρ̂, N, s², t, ρ̇, coasting since (t) or None]
     recent: dict = {}         # key -> the last M code − prediction differences
-    cusum: dict = {}          # key -> [g+, g−, ρ̂ where g+ was last 0, … g−, the Doppler's
-                              #         range change since each, N there for each]
+    cusum: dict = {}          # key -> per side (rising, falling): [g, ρ̂ where g was last 0,
+                              #         the Doppler's range change since, N there]
     M = 10
     for e in range(len(t_ep)):
         rows = order[bounds[e]:bounds[e + 1]]
@@ -195,16 +195,16 @@ def smooth_code(obs: GnssObservations, tau_s: float = 30.0, jump_sigma: float = 
             drifting = len(hist) == M and (sum(hist) / M) ** 2 > jump_sigma**2 * st[2] / M
             cu = cusum.get(keys[i])
             if cu is None:
-                cu = cusum[keys[i]] = [0.0, 0.0, st[0], st[0], 0.0, 0.0, st[1], st[1]]
+                cu = cusum[keys[i]] = [[0.0, st[0], 0.0, st[1]], [0.0, st[0], 0.0, st[1]]]
             inc = p - st[0]                           # the Doppler's range change (+ clock)
             z = dd / math.sqrt(st[2])
-            cu[0], cu[4] = max(0.0, cu[0] + z - cusum_k), cu[4] + inc
-            cu[1], cu[5] = max(0.0, cu[1] - z - cusum_k), cu[5] + inc
-            side = 0 if cu[0] > cu[1] else 1
-            ramp = st[5] is None and cu[side] > cusum_h
-            if ramp and cu[6 + side] >= 0.5 * nmax:   # from where the drift began, if the
+            for c, sgn in zip(cu, (1.0, -1.0)):
+                c[0], c[2] = max(0.0, c[0] + sgn * z - cusum_k), c[2] + inc
+            c = cu[0] if cu[0][0] > cu[1][0] else cu[1]
+            ramp = st[5] is None and c[0] > cusum_h
+            if ramp and c[3] >= 0.5 * nmax:           # from where the drift began, if the
                 # smoother had settled there (an early range carries the raw code's noise)
-                p = cu[2 + side] + cu[4 + side]
+                p = c[1] + c[2]
             if dd * dd > jump_sigma**2 * st[2] or drifting or ramp:
                 since = st[5] if st[5] is not None else obs.t[i]
                 if obs.t[i] - since < coast_s:        # coast on the Doppler
@@ -217,11 +217,11 @@ def smooth_code(obs: GnssObservations, tau_s: float = 30.0, jump_sigma: float = 
             n = min(st[1] + 1.0, nmax)
             pr[i] = pr[i] / n + (1.0 - 1.0 / n) * p
             N[i] = n
-            if st[5] is not None:                     # the code agrees again: a fresh CUSUM
-                cu[:] = [0.0, 0.0, pr[i], pr[i], 0.0, 0.0, n, n]
-            for side in (0, 1):                       # the last smoothed range at zero
-                if cu[side] == 0.0:
-                    cu[2 + side], cu[4 + side], cu[6 + side] = pr[i], 0.0, n
+            for c in cu:
+                if st[5] is not None:                 # the code agrees again: a fresh CUSUM
+                    c[0] = 0.0
+                if c[0] == 0.0:                       # the last smoothed range at zero
+                    c[1:] = [pr[i], 0.0, n]
             state[keys[i]] = [pr[i], n, st[2], obs.t[i], rr[i], None]
             done.add(i)
         for i in rows:
