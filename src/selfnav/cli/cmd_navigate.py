@@ -178,8 +178,8 @@ def register(app: typer.Typer) -> None:
             help="What carries the IMU: its motion constraints and its start (auto: a car's, "
                  "and a platform that moves slower than a car's start needs is started as a "
                  "slow platform; pedestrian, rover, boat, aircraft, drone start at once, at "
-                 "rest or moving at any speed; NHC with a mounting-yaw state for pedestrian "
-                 "and rover, none for boat, aircraft, drone).")] = "auto",
+                 "rest or moving at any speed; NHC with a mounting-yaw state for pedestrian, "
+                 "rover and boat (its sway: σ 1 m/s), none for aircraft, drone).")] = "auto",
         nhc: Annotated[Optional[bool], typer.Option(
             "--nhc/--no-nhc", help="Non-holonomic constraint (default: as the platform "
                                    "says; on for a car).")] = None,
@@ -191,7 +191,7 @@ def register(app: typer.Typer) -> None:
             "--mount-states/--no-mount-states",
             help="Estimate the IMU's pitch and yaw to the vehicle (2 states, seen by the "
                  "NHC; default: as the platform says — off for a car, on for a walker, a "
-                 "rover and a slow platform).")] = None,
+                 "rover, a boat and a slow platform).")] = None,
         magnetometer_aid: Annotated[Optional[bool], typer.Option(
             "--magnetometer-aid/--no-magnetometer-aid",
             help="After the start, the magnetometer (the IMU file's mx,my,mz or --mag) as a "
