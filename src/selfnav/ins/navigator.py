@@ -46,7 +46,7 @@ from selfnav.ins.ekf import (IBA, IBG, IP, IR, IV, PACK, PACK_SIZE, InsGnssFilte
                              output_covariance, pack_state, rts_smooth)
 from selfnav.ins.headings import heading_hypotheses, split_heading
 from selfnav.ins.hypotheses import FaultBank
-from selfnav.ins.measurements import (ForwardSpeed, Heading, LevelRoad, NonHolonomic,
+from selfnav.ins.measurements import (ForwardSpeed, Heading, LevelRoad, NhcCheck, NonHolonomic,
                                       PositionFix,
                                       RunVelocity, VelocityFix, WheelSpeed, ZeroRate,
                                       ZeroVelocity, vehicle_velocity)
@@ -326,6 +326,7 @@ class Navigator:
         self.smoother = smoother
         self.flt: InsGnssFilter | None = None
         self.bank: FaultBank | None = None
+        self.nhc_check = NhcCheck()     # does the platform move along its nose?
         self.startup = StartUp(config, time_offset_applied=self.offset_applied,
                                start_check=None if road_aid is None else road_aid.start_check)
         self._given_init = init
@@ -841,6 +842,18 @@ class Navigator:
             self.bank.on_correction(self._dx, flt)
         self._record_epoch()
 
+    def _warn_nhc(self, t):
+        import warnings
+
+        from selfnav.errors import SelfnavWarning
+
+        eff = self.nhc_check.seen[1]
+        warnings.warn(f"at {t:.0f} s: the sideways constraint and the fixes disagree, "
+                      f"correlated over seconds (σ {eff:.1f} m/s would cover it, against "
+                      f"{self.cfg.vehicle.nhc_sigma:g}): the platform slips sideways (a hull "
+                      f"yawing in the waves: --platform boat, or --no-nhc) or the fixes drag "
+                      f"it sideways", SelfnavWarning, stacklevel=4)
+
     def _aid_epoch(self, te):
         flt, veh = self.flt, self.cfg.vehicle
         w_blk = np.concatenate(self._blk_w) if self._blk_w else np.zeros((0, 3))
@@ -906,8 +919,11 @@ class Navigator:
             if self._rest:
                 dx = dx + f.update(ZeroVelocity(veh.zupt_sigma).model(f))
             elif veh.nhc:
-                dx = dx + f.update(NonHolonomic(veh.nhc_sigma, veh.nhc_sigma_up
-                                                or veh.nhc_sigma).model(f))
+                m = NonHolonomic(veh.nhc_sigma, veh.nhc_sigma_up or veh.nhc_sigma).model(f)
+                if f is flt and self._status(te) is NavStatus.GNSS and self.nhc_check.add(
+                        te, m.r[0], veh.nhc_sigma) and veh.platform.startswith("auto"):
+                    self._warn_nhc(te)      # (a platform the user named: the JSON says it)
+                dx = dx + f.update(m)
             elif not zaru:
                 continue
             if f is flt:
@@ -1707,6 +1723,10 @@ class Navigator:
                 "noise_scale": float(flt.q_scale),
                 "covariance_reopenings": 0 if self.adapter is None else self.adapter.reopenings,
                 "states": int(flt.nx)})
+            if self.cfg.vehicle.nhc:
+                ch = self.nhc_check
+                out["nhc_check"] = {"largest_sigma_mps": float(ch.largest),
+                                    "slip_seen_s": None if ch.seen is None else ch.seen[0]}
             if flt.layout.tdrift is not None:
                 j = flt.layout.tdrift.start
                 out["imu_clock_drift_ppm"] = 1e6 * float(flt.clock_drift)
