@@ -190,6 +190,8 @@ def run_roadnav(seed: int, params: dict) -> dict:
         "odometer_sf": float(sim.odometer.meta["scale_factor"]) if sim.odometer is not None
         else float("nan"),
         "odometer_sf_est": float(sol.stats.get("odometer_scale_factor", np.nan)),
+        # when the sideways-constraint check warned (selfnav.ins.measurements.NhcCheck)
+        "nhc_slip_s": float((sol.stats.get("nhc_check") or {}).get("slip_seen_s") or np.nan),
         "sim_cpu_s": c1 - c0, "nav_cpu_s": c2 - c1, "cpu_s": time.process_time() - c0,
         "wall_s": time.perf_counter() - w0,
     }
@@ -202,8 +204,8 @@ ROW_KEYS = ("map", "sim_seed", "windows", "startup_window", "kinds", "along_rms_
             "cross_rms_m", "along_max_m", "cross_max_m", "along_heading_rms_m",
             "cross_heading_rms_m", "horizontal_rms_m", "horizontal_p95_m", "off_route_s",
             "on_route", "start_s", "error", "sigma", "err_sigma_p95", "beyond_5sigma", "grade",
-            "map_aid", "odometer_sf", "odometer_sf_est", "sim_cpu_s", "nav_cpu_s", "cpu_s",
-            "wall_s")
+            "map_aid", "odometer_sf", "odometer_sf_est", "nhc_slip_s", "sim_cpu_s", "nav_cpu_s",
+            "cpu_s", "wall_s")
 
 
 def _sigma_honesty(ev, sol) -> dict:
