@@ -253,10 +253,10 @@ class NhcCheck:
 
     def __init__(self, window: int = 150, windows: int = 2, k: float = 4.0,
                  rho_max: float = 0.99):
-        self._r = []
-        self.window, self.windows, self.k, self.rho_max = int(window), int(windows), float(k), \
-            float(rho_max)
-        self._over = 0
+        self.window, self.windows = int(window), int(windows)
+        self.k, self.rho_max = float(k), float(rho_max)
+        self._r = []                    # the innovations of the window being filled
+        self._over = 0                  # windows in a row beyond k σ
         self.seen = None                # (t, σ_eff) when first seen
         self.largest = 0.0
 
