@@ -630,66 +630,90 @@ def _reliability(p, ok, edges=P_EDGES):
           f" Brier score {np.mean((p - ok) ** 2):.4f}.")
 
 
-def section_calibrate(graphs):
-    """Issue 21: the calibration of match_p, fitted on the tuning seed only: the fleets of
-    ``real`` (both noise bands, both maps, both map forms) matched with the model's posterior
-    (``calibration=None``), a logistic map of its log odds fitted to "within 5 m of the route"
-    (Platt scaling), the flag's precision against its threshold."""
+def _raw_matches(truth, tracks, map_path, d):
+    """One fleet call as :func:`fleet_run` with ``match_p`` left as the model's posterior;
+    per fix of the matcher (repeated stamps merged): the regressors of the calibration
+    (:func:`selfnav.roads.posterior.calibration_features`) and "within 5 m of the route"."""
     import selfnav.roads.fleet as fleet_mod
-    from selfnav.sim.fleet import simulate_real_fleet, unjoin_map
+    from selfnav.roads.posterior import calibration_features
 
-    print(f"\n## Calibration of match_p on the tuning seed {TUNE_SEEDS} (load {load():.1f})\n")
-    orig = fleet_mod.MatchParams.matcher
+    orig, orig_batch, seen = fleet_mod.MatchParams.matcher, fleet_mod.match_batch, []
 
     def raw(self, graph):                     # the posterior itself, not calibrated
         m = orig(self, graph)
         m.calibration = None
         return m
 
-    fleet_mod.MatchParams.matcher = raw
-    fleet_mod._MATCHERS.clear()
-    ps, oks, flags = [], [], []
-    try:
-        for name in graphs:
-            truth = read_roads(packaged_map(name), strongly_connected=False)
-            with tempfile.TemporaryDirectory() as d:
-                for seed in TUNE_SEEDS:
-                    unj = Path(d) / f"unjoined_{seed}.osm"
-                    unjoin_map(packaged_map(name), unj, seed=seed)
-                    for sig in BANDS.values():
-                        tracks = simulate_real_fleet(truth, 263, seed=seed, sigma=sig)
-                        for mp in (packaged_map(name), unj):
-                            _, ok, _, p, _ = fleet_run(truth, tracks, mp, d)
-                            ps.append(p)
-                            oks.append(ok)
-    finally:
-        fleet_mod.MatchParams.matcher = orig
-        fleet_mod._MATCHERS.clear()
-    p, ok = np.concatenate(ps), np.concatenate(oks).astype(float)
-    from selfnav.roads.posterior import P_EPS
+    def batch(*a, **k):
+        r = orig_batch(*a, **k)
+        seen.extend(r)
+        return r
 
-    z = np.log(np.clip(p, P_EPS, 1.0)) - np.log(np.clip(1.0 - p, P_EPS, 1.0))
-    X = np.column_stack([z, np.ones_like(z)])
-    w = np.array([1.0, 0.0])
-    for _ in range(50):                       # logistic regression, Newton steps
+    fleet_mod.MatchParams.matcher, fleet_mod.match_batch = raw, batch
+    fleet_mod._MATCHERS.clear()
+    try:
+        fleet_run(truth, tracks, map_path, d)
+    finally:
+        fleet_mod.MatchParams.matcher, fleet_mod.match_batch = orig, orig_batch
+        fleet_mod._MATCHERS.clear()
+    by = {tr.track_id: tr for tr in tracks}
+    xs, oks = [], []
+    for tm in seen:
+        r = tm.result
+        if r is None:
+            continue
+        x, y = truth.to_local(r.lat, r.lon)
+        _, c, _ = project_to_polyline(np.column_stack([x, y]), by[tm.track_id].polyline)
+        xs.append(calibration_features(r.match_p, r.moved / r.sigma, len(r.t)))
+        oks.append(np.abs(c) < 5.0)
+    return np.concatenate(xs), np.concatenate(oks)
+
+
+def section_calibrate(graphs):
+    """Issue 21: the calibration of match_p, fitted on the tuning seed only: the fleets of
+    ``real`` (both noise bands, both maps, both map forms) matched with the model's posterior
+    (``calibration=None``); a logistic regression of "within 5 m of the route" on the
+    posterior's log odds, the fix's distance from its road in σ, the track's end and its
+    length (:func:`selfnav.roads.posterior.calibrate`); the flag's precision against its
+    threshold."""
+    from selfnav.sim.fleet import simulate_real_fleet, unjoin_map
+
+    print(f"\n## Calibration of match_p on the tuning seed {TUNE_SEEDS} (load {load():.1f})\n")
+    xs, oks = [], []
+    for name in graphs:
+        truth = read_roads(packaged_map(name), strongly_connected=False)
+        with tempfile.TemporaryDirectory() as d:
+            for seed in TUNE_SEEDS:
+                unj = Path(d) / f"unjoined_{seed}.osm"
+                unjoin_map(packaged_map(name), unj, seed=seed)
+                for sig in BANDS.values():
+                    tracks = simulate_real_fleet(truth, 263, seed=seed, sigma=sig)
+                    for mp in (packaged_map(name), unj):
+                        x, ok = _raw_matches(truth, tracks, mp, d)
+                        xs.append(x)
+                        oks.append(ok)
+    F, ok = np.concatenate(xs), np.concatenate(oks).astype(float)
+    X = np.column_stack([F, np.ones(len(F))])
+    w = np.zeros(X.shape[1])
+    for _ in range(100):                      # logistic regression, Newton steps
         q = 1.0 / (1.0 + np.exp(-X @ w))
-        w += np.linalg.solve((X * (q * (1 - q))[:, None]).T @ X + 1e-9 * np.eye(2),
+        w += np.linalg.solve((X * (q * (1 - q))[:, None]).T @ X + 1e-9 * np.eye(len(w)),
                              X.T @ (ok - q))
-    print(f"Fitted: a = {w[0]:.3f}, b = {w[1]:.3f} (selfnav.roads.hmm.MATCH_P_AB). The model's "
-          "posterior, before the map:\n")
+    print("Fitted (selfnav.roads.hmm.MATCH_P_COEF: log odds, log(1 + moved/σ), end of track, "
+          f"log(fixes), intercept): ({', '.join(f'{v:.3f}' for v in w)}). The model's "
+          "posterior, before the calibration:\n")
+    p = 1.0 / (1.0 + np.exp(-F[:, 0]))
     _reliability(p, ok, (0.0, 0.3, 0.5, 0.7, 0.8, 0.9, 0.95, 0.99, 1.0001))
     q = 1.0 / (1.0 + np.exp(-X @ w))
     print("\nAfter it (the tuning seed itself):\n")
     _reliability(q, ok)
-    print("\nThe flag's precision (within 5 m, of the fixes at or above the threshold, the "
-          "other conditions of `matched` aside) and the share flagged:\n")
-    print("| threshold (calibrated) | the posterior's | precision | share |")
-    print("| ---: | ---: | ---: | ---: |")
+    print("\nThe calibrated probability's precision (within 5 m, of the fixes at or above the "
+          "threshold, the other conditions of `matched` aside) and the share above it:\n")
+    print("| threshold | precision | share |")
+    print("| ---: | ---: | ---: |")
     for thr in (0.95, 0.96, 0.97, 0.98, 0.99):
         sel = q >= thr
-        z_thr = (np.log(thr / (1 - thr)) - w[1]) / w[0]
-        print(f"| {thr:.2f} | {1 / (1 + np.exp(-z_thr)):.3f} | {100 * ok[sel].mean():.2f} % | "
-              f"{100 * sel.mean():.1f} % |")
+        print(f"| {thr:.2f} | {100 * ok[sel].mean():.2f} % | {100 * sel.mean():.1f} % |")
 
 
 def section_acceptance(graphs):

@@ -60,7 +60,7 @@ from selfnav.roads.fixes import (crawl_positions, error_correlation, neighbour_p
                                  stationary_runs)
 from selfnav.roads.graph import RoadGraph
 from selfnav.roads.grid import nearest_distance
-from selfnav.roads.posterior import match_probability, scatter_sigma
+from selfnav.roads.posterior import calibrate, match_probability, scatter_sigma
 from selfnav.roads.routes import (RouteCache, RouteDistances,  # noqa: F401 (API)
                                    transition_route_distance)
 
@@ -98,10 +98,11 @@ ERROR_TAU_S = 60.0
 #: ERROR_CORR_MAX.
 ERROR_CORR_SCALE = 2.0
 ERROR_CORR_MAX = 0.9
-#: Calibration of ``match_p`` (:mod:`selfnav.roads.posterior`): ``a``, ``b`` of the logistic map
-#: of the posterior's log odds, fitted on the tuning fleets (benchmarks/bench_mapmatch.py
-#: ``calibrate``: seed 1, both noise bands).
-MATCH_P_AB = (0.353, 2.720)
+#: Calibration of ``match_p`` (:func:`selfnav.roads.posterior.calibrate`): the logistic
+#: regression's weights of the posterior's log odds, ``log(1 + moved/σ)``, end of track,
+#: ``log(fixes in the track)`` and its intercept, fitted on the tuning fleets
+#: (benchmarks/bench_mapmatch.py ``calibrate``: seed 1, both noise bands, both maps and forms).
+MATCH_P_COEF = (0.312, -0.592, -0.959, -0.459, 4.743)
 
 
 @dataclass
@@ -240,9 +241,9 @@ class HmmMatcher:
     error_corr : float
         Share of the GNSS error that consecutive fixes have in common (0: independent fixes;
         :meth:`estimate_error_corr`), decaying with ``error_tau`` s.
-    calibration : (a, b) or None
-        Calibration of ``match_p`` (:mod:`selfnav.roads.posterior`); None gives the posterior
-        itself.
+    calibration : 5 floats or None
+        Calibration of ``match_p`` (:func:`selfnav.roads.posterior.calibrate`); None gives the
+        posterior itself.
 
     Notes
     -----
@@ -267,7 +268,7 @@ class HmmMatcher:
                  outlier_sigma=OUTLIER_SIGMA_M, matched_p=MATCHED_P,
                  matched_gate=MATCHED_GATE, temperature=TEMPERATURE,
                  stationary_k=STATIONARY_K, error_corr=0.0, error_tau=ERROR_TAU_S,
-                 calibration=MATCH_P_AB):
+                 calibration=MATCH_P_COEF):
         self.graph = graph
         self.temperature = float(temperature)
         self.stationary_k = float(stationary_k)
@@ -481,7 +482,7 @@ class HmmMatcher:
                                for a in ("radius", "beta", "backtrack")))
         point, along, match_p = match_probability(
             d["path"], d["off"], d["post"], d["seg"], d["along"], d["foot"], d["dist"], ep.xy,
-            g, ep.bounds, same_m=SAME_ROAD_M, ab=self.calibration)
+            g, ep.bounds, same_m=SAME_ROAD_M)
         restart = d["back"][d["path"]] < 0
         mseg = d["seg"][d["path"]]
         piece = np.cumsum(restart) - 1
@@ -511,6 +512,7 @@ class HmmMatcher:
             s_gate = sig[sl] if not np.isfinite(s_k) else np.minimum(
                 sig[sl], max(SIGMA_MIN_M, SCATTER_K * s_k))
             gate = np.minimum(self.matched_gate * s_gate, MATCHED_MAX_M)
+            match_p[sl] = calibrate(match_p[sl], moved[sl] / m.sigma, b - a, self.calibration)
             matched = (moved[sl] <= gate) & (match_p[sl] >= self.matched_p) & ~lone[sl]
             out.append(MatchResult(ts[sl], foot[sl], lat[sl], lon[sl], mseg[sl], along[sl],
                                    moved[sl], in_radius[sl], restart[sl],

@@ -11,10 +11,14 @@ model), the probability that the matched position lies on the driven route:
 3. a route is more than one fix's road: the mass of the fix before's (and after's) candidates
    whose road passes by the point, or that are on the point's OpenStreetMap way, counts too
    (the larger of the three);
-4. calibration: ``1 / (1 + exp(-(a·logit(p) + b)))`` with ``a``, ``b`` fitted on simulated
-   tuning fleets (benchmarks/bench_mapmatch.py, seed 1; :data:`selfnav.roads.hmm.MATCH_P_AB`):
-   the model's posterior of the road *at that fix* is conservative for the question "is the
-   point on the driven route", which the neighbouring roads of the route also answer yes.
+4. calibration (:func:`calibrate`): a logistic regression of "within 5 m of the driven route"
+   on the posterior's log odds, the fix's distance from its matched road in σ, whether the fix
+   ends its track and the track's length, fitted on simulated tuning fleets
+   (benchmarks/bench_mapmatch.py ``calibrate``, seed 1; :data:`selfnav.roads.hmm.MATCH_P_COEF`).
+   The model's posterior of the road *at that fix* is conservative for the question "is the
+   point on the driven route", which the neighbouring roads of the route also answer yes; and
+   it is the same for the end fix of a two-fix track as for a fix in the middle of a long one,
+   where the first is put on a crossing road beyond a junction far more often.
 """
 from __future__ import annotations
 
@@ -68,7 +72,7 @@ def road_mass(points, off, shift, post, seg, foot, dist, xy, graph, track, same_
 
 
 def match_probability(path, off, post, seg, along, foot, dist, xy, graph, bounds, *,
-                      same_m, ab, slide=True, route=True):
+                      same_m, slide=True, route=True):
     """The matched point of each epoch (its road point, or a junction: step 2 of the module
     docstring), its offset along its segment, and ``match_p``.
 
@@ -81,11 +85,11 @@ def match_probability(path, off, post, seg, along, foot, dist, xy, graph, bounds
     xy : (N, 2) m, positions of the epochs
     bounds : track starts and the total (epochs)
     same_m : float
-    ab : (a, b) calibration, or None for the posterior itself
 
     Returns
     -------
     point : (N, 2) m, along : (N,) m, match_p : (N,)
+        ``match_p`` not yet calibrated (:func:`calibrate`).
     """
     n = len(path)
     track = np.repeat(np.arange(len(bounds) - 1), np.diff(bounds))
@@ -109,11 +113,29 @@ def match_probability(path, off, post, seg, along, foot, dist, xy, graph, bounds
         for shift in (1, -1):
             p = np.maximum(p, road_mass(point, off, shift, post, seg, foot, dist, xy, graph,
                                         track, same_m, need=need, way_of=way))
-    p = np.clip(p, 0.0, 1.0)
-    if ab is not None:                     # (log odds within ±9.2: the 4 decimals of the output)
-        z = np.log(np.clip(p, P_EPS, 1.0)) - np.log(np.clip(1.0 - p, P_EPS, 1.0))
-        p = 1.0 / (1.0 + np.exp(-(ab[0] * z + ab[1])))
-    return point, a_s, p
+    return point, a_s, np.clip(p, 0.0, 1.0)
+
+
+def calibration_features(p, moved_sigma, n_fixes):
+    """The regressors of :func:`calibrate` for one track: ``(N, 4)`` -- the posterior's log
+    odds (within ±9.2: the four decimals of the output), ``log(1 + moved / σ)``, 1 at the
+    track's first and last fix, ``log`` of the track's number of fixes."""
+    p = np.asarray(p, float)
+    z = np.log(np.clip(p, P_EPS, 1.0)) - np.log(np.clip(1.0 - p, P_EPS, 1.0))
+    end = np.zeros(len(p))
+    end[[0, -1]] = 1.0 if len(p) else 0.0
+    return np.column_stack([z, np.log1p(np.asarray(moved_sigma, float)), end,
+                            np.full(len(p), np.log(max(n_fixes, 1)))])
+
+
+def calibrate(p, moved_sigma, n_fixes, coef):
+    """``match_p`` of one track's fixes from the model's posterior ``p`` (step 4 of the module
+    docstring): ``1 / (1 + exp(-(X·coef[:4] + coef[4])))`` with ``X`` the
+    :func:`calibration_features`. ``coef`` None: ``p`` itself."""
+    if coef is None or not len(p):
+        return np.asarray(p, float)
+    x = calibration_features(p, moved_sigma, n_fixes) @ np.asarray(coef[:4]) + coef[4]
+    return 1.0 / (1.0 + np.exp(-x))
 
 
 def scatter_sigma(xy, seg, graph, bounds, min_pairs=3):
