@@ -13,6 +13,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from selfnav.correlation import ar1_variance_factor
+
 _CN0_EDGES = np.array([25.0, 30.0, 35.0, 40.0, 45.0])       # C/N0 bands (dBHz)
 
 
@@ -116,7 +118,7 @@ class ResidualCorrelation:
             self.last[k] = (t, v) if ok else None
         if self.sxx > 0 and self.syy > 0:
             rho = min(max(self.sxy / math.sqrt(self.sxx * self.syy), 0.0), 0.999)
-            self.inflation = min((1 + rho) / (1 - rho), self.max_inflation)
+            self.inflation = min(ar1_variance_factor(rho), self.max_inflation)
         return self.inflation
 
 

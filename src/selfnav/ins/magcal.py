@@ -51,6 +51,7 @@ from collections import deque
 import numpy as np
 
 from selfnav import attitude as att
+from selfnav.correlation import ar1_variance_factor, lag_one_correlation
 
 #: Least heading σ of a calibrated reading, rad (the soft iron's heading-dependent part, which a
 #: circle does not model, and the declination model).
@@ -267,13 +268,9 @@ class HardIronFit:
         # residuals correlated from one reading to the next (the levelling's tilt error wanders):
         # the covariance widened by the effective number of independent readings
         rk = r.reshape(2, n)[:, keep[:n]]
-        rho = 0.0
-        if rk.shape[1] > 3:
-            den = float(np.sum(rk * rk))
-            rho = min(max(float(np.sum(rk[:, 1:] * rk[:, :-1])) / den, 0.0), 0.95) if den > 0 \
-                else 0.0
+        rho = lag_one_correlation(rk, 0.95) if rk.shape[1] > 3 else 0.0
         try:
-            cov = s_r * s_r * np.linalg.inv(J[keep].T @ J[keep]) * (1.0 + rho) / (1.0 - rho)
+            cov = s_r * s_r * np.linalg.inv(J[keep].T @ J[keep]) * ar1_variance_factor(rho)
         except np.linalg.LinAlgError:
             return None
         return self._candidate("turns", x[2:4].copy(), B,

@@ -58,6 +58,7 @@ import numpy as np
 
 from selfnav import attitude as att
 from selfnav.attitude import rotvec_to_dcm3, skew3
+from selfnav.correlation import ar1_variance_factor, lag_one_correlation
 from selfnav.earth import OMEGA_EARTH, enu_offset, enu_rotation, geodetic_to_ecef
 from selfnav.gnss.models import doppler_model, pseudorange_model
 from selfnav.ins.ekf import IBG, IP, IV
@@ -266,9 +267,8 @@ class NhcCheck:
             return False
         x = np.asarray(self._r)
         self._r = []
-        ss = float(np.sum(x * x))
-        rho = min(max(float(np.sum(x[1:] * x[:-1])) / max(ss, 1e-30), 0.0), self.rho_max)
-        eff = math.sqrt(ss / len(x) * (1.0 + rho) / (1.0 - rho))
+        rho = lag_one_correlation(x, self.rho_max)
+        eff = math.sqrt(float(np.mean(x * x)) * ar1_variance_factor(rho))
         self.largest = max(self.largest, eff)
         self._over = self._over + 1 if eff > self.k * sigma else 0
         if self._over >= self.windows and self.seen is None:

@@ -38,6 +38,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from selfnav import attitude as att
+from selfnav.correlation import ar1_factor_of_time
 from selfnav.earth import offset_to_geodetic
 from selfnav.errors import SelfnavError
 from selfnav.ins.calibrate import NoiseAdapter, vibration_level, vibration_scale
@@ -62,14 +63,6 @@ _KIND_FIX, _KIND_AID, _KIND_HEADING, _KIND_ODO = 0, 1, 2, 3
 _STATUS_CODE = {s: i for i, s in enumerate(NavStatus)}
 _PACK_LEVER = PACK["lever"]          # (a row's first 21 packed values: pos, vel, C, b_g, b_a)
 assert PACK["ba"].stop == 21
-
-
-def _ar1_inflation(step_s: float, corr_s: float) -> float:
-    """``(1+ρ)/(1−ρ)``, ``ρ = exp(−step/τ)``: the variance factor that makes measurements
-    every ``step_s`` of an error correlated over ``corr_s`` (first order) carry, in sum, the
-    information they have — not as if each were independent."""
-    rho = math.exp(-step_s / corr_s)
-    return (1.0 + rho) / (1.0 - rho)
 
 
 @dataclass(frozen=True)
@@ -1026,7 +1019,7 @@ class Navigator:
             dv = vs[lag:] - vs[:-lag]
             walk = float(np.sqrt(np.mean(dv * dv) / veh.speed_hold_corr_s))
             sigma = math.hypot(sigma, walk * math.sqrt(te - tp[-1]))
-        sigma *= math.sqrt(_ar1_inflation(1.0, veh.speed_hold_corr_s))
+        sigma *= math.sqrt(ar1_factor_of_time(1.0, veh.speed_hold_corr_s))
         prior = ForwardSpeed(pace, sigma)
         self.counts["pace_priors"] += 1
         for f in self._filters():
@@ -1167,7 +1160,7 @@ class Navigator:
             hdg, sigma = est
             # what is left of the deviation after the fit (soft iron, tilt) changes with the
             # heading, slowly: each reading counts for what its share of ``mag_corr_s`` adds
-            sigma *= math.sqrt(_ar1_inflation(max(veh.mag_step, 1e-3), veh.mag_corr_s))
+            sigma *= math.sqrt(ar1_factor_of_time(max(veh.mag_step, 1e-3), veh.mag_corr_s))
         else:
             hdg = float(magnetic_heading(mag_b, roll, pitch, self._declination))
             sigma = veh.mag_heading_sigma
