@@ -345,3 +345,59 @@ def test_a_standing_car_outweighs_one_multipath_fix_before_it():
         off = np.hypot(*(r.xy - car).T)
         assert np.all(off[1:] < 3.0) and off[0] < 20.0, (sigma, off)
         assert not r.matched[0] and r.matched[1:].all()
+
+
+def _l_shaped_graph():
+    """An L of two-way road, (0, 0) → (200, 0) → (200, 200), and a road (0, 150)–(100, 150)
+    that no route reaches (local metres)."""
+    from selfnav.roads.graph import RoadGraph
+
+    xy = [(0, 0), (200, 0), (200, 200), (0, 150), (100, 150)]
+    pairs = [(0, 1), (1, 0), (1, 2), (2, 1), (3, 4), (4, 3)]
+    u, v = zip(*pairs)
+    return RoadGraph("L", np.radians(60.5), np.radians(27.0), np.arange(5), xy, u, v,
+                     [1, 1, 2, 2, 3, 3], ["residential"] * 6, [13.9] * 6)
+
+
+def test_points_along_route_are_at_their_share_of_its_length():
+    """Analytic: from 150 m along the first leg to 50 m up the second, a 100 m route: 40 % of
+    it is 190 m along the first leg, 60 % 10 m up the second; none to an unreachable road."""
+    from selfnav.roads.routes import points_along_route
+
+    g = _l_shaped_graph()
+    xy, seg, along = points_along_route(g, 0, 150.0, 2, 50.0, [0.0, 0.4, 0.6, 1.0])
+    np.testing.assert_allclose(xy, [[150, 0], [190, 0], [200, 10], [200, 50]], atol=1e-9)
+    assert list(seg) == [0, 0, 2, 2] and np.allclose(along, [150, 190, 10, 50])
+    xy, seg, _ = points_along_route(g, 0, 20.0, 0, 80.0, [0.5])           # one segment
+    np.testing.assert_allclose(xy, [[50, 0]])
+    assert points_along_route(g, 0, 150.0, 4, 10.0, [0.5]) is None
+    assert points_along_route(g, 0, 150.0, 3, 150.0, [0.5], limit=150.0) is None  # 200 m
+    xy, _, _ = points_along_route(g, 0, 150.0, 3, 150.0, [0.5], limit=250.0)   # up and back
+    np.testing.assert_allclose(xy, [[200, 150]])                 # 200 of its 400 m
+
+
+def test_a_multipath_fix_matched_off_the_route_is_put_on_its_neighbours_route():
+    """A fix 100 m off, matched 50 m away to a road its neighbours' route never takes (the chain broke
+    at it): it goes onto the route between its neighbours at its time's share (8 of 20 s:
+    40 % of the 100 m), the breaks close; a good fix and an outlier without a route stay."""
+    from selfnav.roads.fixes import outliers_on_route
+
+    g = _l_shaped_graph()
+    t = np.array([0.0, 8.0, 20.0])
+    fix = np.array([[150.0, 1.0], [60.0, 100.0], [199.0, 50.0]])
+    point = np.array([[150.0, 0.0], [60.0, 150.0], [200.0, 50.0]])
+    seg, along = np.array([0, 4, 2]), np.array([150.0, 40.0, 50.0])
+    restart = np.array([True, True, True])
+    p, s, a, r, placed = outliers_on_route(t, t, fix, point, seg, along, np.full(3, 3.0),
+                                           restart, np.array([0, 3]), g)
+    np.testing.assert_allclose(p[1], [190.0, 0.0])
+    assert s[1] == 0 and a[1] == pytest.approx(190.0)
+    assert list(placed) == [False, True, False] and list(r) == [True, False, False]
+    # the next fix on the unreachable road: no route, nothing moves
+    seg2, point2 = np.array([0, 4, 5]), point.copy()
+    point2[2] = (10.0, 150.0)
+    p, _, _, r, placed = outliers_on_route(t, t, np.array([[150.0, 1.0], [60.0, 60.0],
+                                                           [10.0, 151.0]]), point2, seg2,
+                                           along, np.full(3, 3.0), restart, np.array([0, 3]),
+                                           g)
+    assert not placed.any() and np.array_equal(p, point2) and r.all()

@@ -1,6 +1,7 @@
 """What the fixes of a track say before they meet the map (issue 21): where its neighbours put
 each fix, which fixes are one standing car, how the fixes of a standing or crawling car sit
-along its road, and how much of the GNSS error is shared by consecutive fixes.
+along its road, where a multipath outlier was (on the route between its neighbours), and how
+much of the GNSS error is shared by consecutive fixes.
 
 These are the parts of :class:`selfnav.roads.hmm.HmmMatcher` that look at the fixes alone
 (local metres of the road graph, SI units).
@@ -176,3 +177,56 @@ def error_correlation(xy, near, heading, dt, forced, sigma, tau, prior=20.0):
     num = np.sum(np.einsum("ij,ij->i", a, b) * w)
     den = np.sum(w * w * 0.5 * (np.einsum("ij,ij->i", a, a) + np.einsum("ij,ij->i", b, b)))
     return float(np.clip(num / (den + prior * np.median(sigma) ** 2), 0.0, 1.0))
+
+
+def outliers_on_route(t_in, t_out, xy, point, seg, along, sigma, restart, bounds, graph, *,
+                      k=5.0, max_speed=60.0, reach=None):
+    """Road positions of the outliers: an epoch whose fix lies more than ``k`` σ from its
+    matched point (the matcher took it as multipath: its emission came from the wide part),
+    between good epochs of the same track, is put on the shortest route between its
+    neighbours' matched positions, at the share of that route's length its time gives (a run
+    of outliers, each at its own time). The road nearest where the neighbours put it
+    (:func:`neighbour_points`) can be a side street the route never takes — or one the fix
+    before cannot reach or the next one cannot be reached from, and the chain broke at it:
+    such a break is closed.
+
+    The route is searched as the matcher searches a transition: up to the straight distance
+    between the neighbours' points plus ``reach`` (per epoch, m: the matcher's (|log break| +
+    2) β), never beyond ``max_speed`` × the time between them. Returns ``(point, seg, along,
+    restart, placed)`` (copies; ``placed`` marks the epochs moved); an outlier at a track's
+    end, or without such a route, keeps its match."""
+    from selfnav.roads.routes import points_along_route
+
+    point, seg, along, restart = point.copy(), seg.copy(), along.copy(), restart.copy()
+    n = len(point)
+    out = np.hypot(*(xy - point).T) > k * sigma
+    placed = np.zeros(n, bool)
+    if not out.any():
+        return point, seg, along, restart, placed
+    arrays = graph.csr_arrays()
+    track = np.repeat(np.arange(len(bounds) - 1), np.diff(bounds))
+    i = 0
+    while i < n:
+        if not out[i]:
+            i += 1
+            continue
+        j = i
+        while j + 1 < n and out[j + 1] and track[j + 1] == track[i]:
+            j += 1
+        a, b = i - 1, j + 1
+        if a >= 0 and b < n and track[a] == track[i] == track[b] and not out[a] \
+                and not out[b]:
+            span = float(t_in[b] - t_out[a])
+            if span > 0:
+                fr = (t_in[i:b] - t_out[a]) / span
+                limit = max_speed * span
+                if reach is not None:
+                    limit = min(limit, float(np.hypot(*(point[b] - point[a]))) + reach[a])
+                r = points_along_route(graph, seg[a], along[a], seg[b], along[b], fr,
+                                       limit=limit, arrays=arrays)
+                if r is not None:
+                    point[i:b], seg[i:b], along[i:b] = r
+                    placed[i:b] = True
+                    restart[i:b + 1] = False
+        i = j + 1
+    return point, seg, along, restart, placed

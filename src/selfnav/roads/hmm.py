@@ -57,7 +57,7 @@ import numpy as np
 
 from selfnav.roads import viterbi
 from selfnav.roads.fixes import (crawl_positions, error_correlation, neighbour_points,
-                                 stationary_runs)
+                                 outliers_on_route, stationary_runs)
 from selfnav.roads.graph import RoadGraph
 from selfnav.roads.grid import nearest_distance
 from selfnav.roads.posterior import calibrate, match_probability, scatter_sigma
@@ -87,6 +87,9 @@ K_NEIGHBOUR = 4
 #: The posterior sums use every log probability divided by this (1: the model's posterior);
 #: the Viterbi path does not depend on it.
 TEMPERATURE = 1.0
+#: A fix farther than OUTLIER_ROUTE_K σ from its matched road is put on the route between its
+#: neighbours (:func:`~selfnav.roads.fixes.outliers_on_route`); None: left where it matched.
+OUTLIER_ROUTE_K = 5.0
 #: A fix within STATIONARY_K σ of the mean of the run before it continues a stationary run.
 STATIONARY_K = 3.0
 #: Candidates whose road points lie this close (m) count as the same road for ``match_p``.
@@ -102,7 +105,7 @@ ERROR_CORR_MAX = 0.9
 #: regression's weights of the posterior's log odds, ``log(1 + moved/σ)``, end of track,
 #: ``log(fixes in the track)`` and its intercept, fitted on the tuning fleets
 #: (benchmarks/bench_mapmatch.py ``calibrate``: seed 1, both noise bands, both maps and forms).
-MATCH_P_COEF = (0.312, -0.592, -0.959, -0.459, 4.743)
+MATCH_P_COEF = (0.320, -0.592, -0.969, -0.484, 4.786)
 
 
 @dataclass
@@ -253,8 +256,9 @@ class HmmMatcher:
     ``max_speed`` allows in the time between them. Memory is O(N k) for N fixes (about 4 kB
     per fix with k = 16: Viterbi scores, forward and backward sums, the stored transition
     weights) plus a bounded route store. ``log_break``, ``outlier_p``, ``outlier_sigma``,
-    ``matched_p``, ``matched_gate``, ``temperature`` (of the posterior only) and
-    ``stationary_k``: the module's constants of the same names.
+    ``matched_p``, ``matched_gate``, ``temperature`` (of the posterior only),
+    ``stationary_k`` and ``outlier_k`` (``OUTLIER_ROUTE_K``): the module's constants of the
+    same names.
 
     Examples
     --------
@@ -268,7 +272,7 @@ class HmmMatcher:
                  outlier_sigma=OUTLIER_SIGMA_M, matched_p=MATCHED_P,
                  matched_gate=MATCHED_GATE, temperature=TEMPERATURE,
                  stationary_k=STATIONARY_K, error_corr=0.0, error_tau=ERROR_TAU_S,
-                 calibration=MATCH_P_COEF):
+                 calibration=MATCH_P_COEF, outlier_k=OUTLIER_ROUTE_K):
         self.graph = graph
         self.temperature = float(temperature)
         self.stationary_k = float(stationary_k)
@@ -281,6 +285,7 @@ class HmmMatcher:
         self.error_corr = float(error_corr)
         self.error_tau = float(error_tau)
         self.calibration = None if calibration is None else tuple(map(float, calibration))
+        self.outlier_k = None if outlier_k is None else float(outlier_k)
         self._given = {"beta": beta, "radius": radius, "backtrack": backtrack}
         self._set_sigma(sigma)
         self.k = int(k)
@@ -478,13 +483,25 @@ class HmmMatcher:
         n = len(ts)
         ep = self._epochs(ts, xy, sig, bounds)
         track_of = np.repeat(np.arange(len(per)), np.diff(ep.bounds))
-        d = self._decode(ep, *(np.array([getattr(m, a) for m in per])[track_of]
-                               for a in ("radius", "beta", "backtrack")))
+        radius_e, beta_e, back_e = (np.array([getattr(m, a) for m in per])[track_of]
+                                    for a in ("radius", "beta", "backtrack"))
+        d = self._decode(ep, radius_e, beta_e, back_e)
         point, along, match_p = match_probability(
             d["path"], d["off"], d["post"], d["seg"], d["along"], d["foot"], d["dist"], ep.xy,
             g, ep.bounds, same_m=SAME_ROAD_M)
         restart = d["back"][d["path"]] < 0
         mseg = d["seg"][d["path"]]
+        if self.outlier_k is not None:
+            point, mseg, along, restart, placed = outliers_on_route(
+                ep.t_in, ep.t_out, ep.xy, point, mseg, along, ep.sigma, restart, ep.bounds, g,
+                k=self.outlier_k, max_speed=self.max_speed, reach=self.cut * beta_e)
+            # the outlier's point stands on its neighbours' route: as sure as the less sure
+            if placed.any():
+                prev = np.flatnonzero(~placed)
+                lo = prev[np.clip(np.searchsorted(prev, np.flatnonzero(placed)) - 1, 0, None)]
+                hi = prev[np.clip(np.searchsorted(prev, np.flatnonzero(placed)), None,
+                                  len(prev) - 1)]
+                match_p[placed] = np.minimum(match_p[lo], match_p[hi])
         piece = np.cumsum(restart) - 1
         # alone in its piece of chain (in a track of two epochs or more)
         lone = (np.bincount(piece)[piece] < 2) & np.repeat(np.diff(ep.bounds) >= 2,

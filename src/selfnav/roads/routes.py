@@ -435,3 +435,65 @@ def transition_route_distance(graph: RoadGraph, cand: Candidates, i, j, *, backt
         d_back = np.where(same & (aj < ai), ai - aj, (Lj - aj) + back_gap + ai)
         d_fwd = np.where(d_back <= backtrack, np.minimum(d_fwd, d_back), d_fwd)
     return d_fwd
+
+
+def _path(indptr, indices, weights, src: int, dst: int, limit: float) -> list:
+    """Nodes of the shortest route ``src -> dst`` within ``limit`` m (Dijkstra on a heap,
+    settling only the neighbourhood the bound allows); [] where there is none."""
+    import heapq
+
+    dist, pred, done = {src: 0.0}, {src: -1}, set()
+    heap = [(0.0, src)]
+    while heap:
+        d, u = heapq.heappop(heap)
+        if u in done:
+            continue
+        if u == dst:
+            path = [u]
+            while pred[path[-1]] >= 0:
+                path.append(pred[path[-1]])
+            return path[::-1]
+        done.add(u)
+        for j in range(indptr[u], indptr[u + 1]):
+            v, nd = int(indices[j]), d + float(weights[j])
+            if nd <= limit and nd < dist.get(v, np.inf):
+                dist[v], pred[v] = nd, u
+                heapq.heappush(heap, (nd, v))
+    return []
+
+
+def points_along_route(graph: RoadGraph, seg_a, along_a, seg_b, along_b, fractions, *,
+                       limit=np.inf, arrays=None):
+    """Road positions at ``fractions`` (0 … 1) of the shortest route's length from the road
+    position ``(seg_a, along_a)`` to ``(seg_b, along_b)``: ``(xy (K, 2), seg (K,), along
+    (K,))``, or None where no route exists within ``limit`` m (from the end node of
+    ``seg_a`` to the start node of ``seg_b``, as the matcher bounds a transition's route).
+    ``arrays``: the graph's
+    :meth:`~selfnav.roads.graph.RoadGraph.csr_arrays` (computed when not given)."""
+    seg_a, seg_b = int(seg_a), int(seg_b)
+    fr = np.clip(np.asarray(fractions, float), 0.0, 1.0)
+    if seg_a == seg_b and along_b >= along_a:
+        segs, starts = np.array([seg_a]), np.array([along_a])
+        lens = np.array([along_b - along_a])
+    else:
+        w, idx, ptr = arrays if arrays is not None else graph.csr_arrays()
+        nodes = _path(ptr, idx, w, int(graph.seg_v[seg_a]), int(graph.seg_u[seg_b]),
+                      float(limit))
+        if not nodes:
+            return None
+        mid = segment_lookup(graph)(nodes[:-1], nodes[1:]) if len(nodes) > 1 else \
+            np.zeros(0, np.int64)
+        segs = np.concatenate([[seg_a], mid, [seg_b]]).astype(np.int64)
+        lens = np.concatenate([[graph.seg_len[seg_a] - along_a], graph.seg_len[mid],
+                               [along_b]])
+        starts = np.concatenate([[along_a], np.zeros(len(mid) + 1)])
+    lens = np.maximum(lens, 0.0)
+    total = float(lens.sum())
+    cum = np.concatenate([[0.0], np.cumsum(lens)])
+    s = fr * total
+    k = np.clip(np.searchsorted(cum, s, side="right") - 1, 0, len(segs) - 1)
+    sg = segs[k]
+    al = np.clip(starts[k] + s - cum[k], 0.0, graph.seg_len[sg])
+    L = np.where(graph.seg_len[sg] > 0, graph.seg_len[sg], 1.0)
+    a, b = graph.xy[graph.seg_u[sg]], graph.xy[graph.seg_v[sg]]
+    return a + (b - a) * (al / L)[:, None], sg, al
