@@ -3,8 +3,9 @@ each fix, which fixes are one standing car, how the fixes of a standing or crawl
 along its road, where a multipath outlier was (on the route between its neighbours), and how
 much of the GNSS error is shared by consecutive fixes.
 
-These are the parts of :class:`selfnav.roads.hmm.HmmMatcher` that look at the fixes alone
-(local metres of the road graph, SI units).
+These are the parts of :class:`selfnav.roads.hmm.HmmMatcher` that look at the fixes alone (and,
+for an outlier, at the route its neighbours were matched on), in local metres of the road graph,
+SI units.
 """
 from __future__ import annotations
 
