@@ -66,3 +66,21 @@ def test_one_drive_through_the_pipeline():
     assert row["sigma"] > 0 and row["error"] == row["horizontal_rms_m"]
     assert r.summary["along_rms_m"]["max"] == row["along_rms_m"]
     assert r.summary["worst_along"][0]["seed"] == row["seed"]
+
+
+@pytest.mark.slow
+def test_a_vouched_dead_reckoning_keeps_its_road_lines_through_an_outlier_window():
+    """Campaign drive 8632296919476031792 (master seed 2; SIMULATED consumer car on Karhula, a
+    147 s white window and a 127 s Gauss–Markov one): after the corner at 407 s the dead
+    reckoning's along-track σ is 12–14 m; with the road lines dropped beyond 10 m it ran 5–7 m
+    beside its road for 22 s. Its INS has stood the fixes' test, so the lines stay (their
+    heading check guards the junctions): off the route at most 10 s, σ honest."""
+    import warnings
+
+    from selfnav.campaigns import ROADNAV_DEFAULTS, run_roadnav
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")           # the start at 39 s: coverage 93.5 %
+        r = run_roadnav(8632296919476031792, dict(ROADNAV_DEFAULTS))
+    assert r["off_route_s"] <= 10.0 and r["cross_rms_m"] < 2.0, r
+    assert r["err_sigma_p95"] <= 3.0

@@ -259,10 +259,12 @@ class EkfRoadAid:
         axis) is above this, m: a fact of road maps — junctions 50–100 m apart — beyond which
         the cloud cannot tell the road the car is on from the one its dead reckoning drifted
         to (simulated drives: a map-aided dead reckoning 900 m off at σ 10 m)
-    dr_sigma_m : while dead-reckoning, road constraints only below this horizontal σ, m (a
-        cloud that follows the dead reckoning can still tell the road while the filter is sure
-        to a tenth of the junction spacing; beyond, it takes the junction the drift picks:
-        simulated drives 300 m off at σ 10 m — the σ then a lie, issue 18)
+    dr_sigma_m : while dead-reckoning with an INS no dead reckoning of which has yet stood the
+        fixes' test (``ins_vouched`` False), road constraints only below this horizontal σ, m
+        (a cloud that follows the dead reckoning can still tell the road while the filter is
+        sure to a tenth of the junction spacing; beyond, it takes the junction the drift picks:
+        simulated drives 300 m off at σ 10 m — the σ then a lie, issue 18); a vouched INS
+        keeps them up to ``max_sigma_m``, its heading checked against the road's
     q_along : (m/s)²/s, along-track speed variance added while the cloud judges GNSS
         unhealthy (:meth:`_widen_along`; None: off)
     curve_sigma : σ of the cross-track constraint while turning through a gentle curve (no
@@ -638,12 +640,16 @@ class EkfRoadAid:
             share = max(share, self._line_weight(legs, w, pos))
         self.history.append((t, *est["xy"], est["seg"], est["spread"], share))
         sigma_h = float(np.sqrt(max(np.linalg.eigvalsh(flt.P[0:2, 0:2])[-1], 0.0)))
-        if self.dead_reckoning and sigma_h > self.dr_sigma_m:
-            # the fixes are not taken (a fault episode, an outage): the cloud follows the dead
-            # reckoning and cannot vouch for a road once the filter is unsure — its lines and
-            # corners turned a filter onto the next road at a junction and made it sure of it
-            # (simulated drives: 300 m off at σ 10 m); the map holds nothing then until fixes
-            # are taken again
+        if self.dead_reckoning and sigma_h > self.dr_sigma_m and not self.ins_vouched:
+            # the fixes are not taken (a fault episode, an outage) and no dead reckoning of this
+            # INS has yet stood the fixes' test: the cloud follows the dead reckoning and cannot
+            # vouch for a road once the filter is unsure — its lines and corners turned a
+            # filter onto the next road at a junction and made it sure of it (simulated drives:
+            # 300 m off at σ 10 m; campaign drive 8017652828310085427, a 192 s white window
+            # from 26 s: 148 m off without this). A vouched INS keeps the lines up to
+            # ``max_sigma_m``: they then need its heading to run along the road (below), which
+            # a wrong branch does not (stop 56: 8632296919476031792 was 5–7 m beside its road
+            # for 22 s at σ 12 m, its lines off)
             return meas
         if sigma_h > self.max_sigma_m:
             # the filter is too unsure of its position for the map to say which road it is on
