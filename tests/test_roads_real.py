@@ -387,17 +387,18 @@ def test_a_multipath_fix_matched_off_the_route_is_put_on_its_neighbours_route():
     fix = np.array([[150.0, 1.0], [60.0, 100.0], [199.0, 50.0]])
     point = np.array([[150.0, 0.0], [60.0, 150.0], [200.0, 50.0]])
     seg, along = np.array([0, 4, 2]), np.array([150.0, 40.0, 50.0])
-    restart = np.array([True, True, True])
-    p, s, a, r, placed = outliers_on_route(t, t, fix, point, seg, along, np.full(3, 3.0),
-                                           restart, np.array([0, 3]), g)
+    restart, mp = np.array([True, True, True]), np.array([0.99, 0.5, 0.9])
+    p, s, a, q, r, placed = outliers_on_route(t, t, fix, point, seg, along, mp,
+                                              np.full(3, 3.0), restart, np.array([0, 3]), g)
     np.testing.assert_allclose(p[1], [190.0, 0.0])
     assert s[1] == 0 and a[1] == pytest.approx(190.0)
     assert list(placed) == [False, True, False] and list(r) == [True, False, False]
+    assert list(q) == [0.99, 0.9, 0.9]                  # as sure as the less sure neighbour
     # the next fix on the unreachable road: no route, nothing moves
     seg2, point2 = np.array([0, 4, 5]), point.copy()
     point2[2] = (10.0, 150.0)
-    p, _, _, r, placed = outliers_on_route(t, t, np.array([[150.0, 1.0], [60.0, 60.0],
-                                                           [10.0, 151.0]]), point2, seg2,
-                                           along, np.full(3, 3.0), restart, np.array([0, 3]),
-                                           g)
+    p, _, _, q, r, placed = outliers_on_route(
+        t, t, np.array([[150.0, 1.0], [60.0, 60.0], [10.0, 151.0]]), point2, seg2, along, mp,
+        np.full(3, 3.0), restart, np.array([0, 3]), g)
     assert not placed.any() and np.array_equal(p, point2) and r.all()
+    assert np.array_equal(q, mp)

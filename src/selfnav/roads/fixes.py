@@ -180,8 +180,8 @@ def error_correlation(xy, near, heading, dt, forced, sigma, tau, prior=20.0):
     return float(np.clip(num / (den + prior * np.median(sigma) ** 2), 0.0, 1.0))
 
 
-def outliers_on_route(t_in, t_out, xy, point, seg, along, sigma, restart, bounds, graph, *,
-                      k=5.0, max_speed=60.0, reach=None):
+def outliers_on_route(t_in, t_out, xy, point, seg, along, match_p, sigma, restart, bounds,
+                      graph, *, k=5.0, max_speed=60.0, reach=None, routes=None):
     """Road positions of the outliers: an epoch whose fix lies more than ``k`` σ from its
     matched point (the matcher took it as multipath: its emission came from the wide part),
     between good epochs of the same track, is put on the shortest route between its
@@ -189,22 +189,25 @@ def outliers_on_route(t_in, t_out, xy, point, seg, along, sigma, restart, bounds
     of outliers, each at its own time). The road nearest where the neighbours put it
     (:func:`neighbour_points`) can be a side street the route never takes — or one the fix
     before cannot reach or the next one cannot be reached from, and the chain broke at it:
-    such a break is closed.
+    such a break is closed. Its ``match_p`` is then its less sure neighbour's (the point
+    stands on their route).
 
     The route is searched as the matcher searches a transition: up to the straight distance
     between the neighbours' points plus ``reach`` (per epoch, m: the matcher's (|log break| +
-    2) β), never beyond ``max_speed`` × the time between them. Returns ``(point, seg, along,
-    restart, placed)`` (copies; ``placed`` marks the epochs moved); an outlier at a track's
-    end, or without such a route, keeps its match."""
-    from selfnav.roads.routes import points_along_route
+    2) β), never beyond ``max_speed`` × the time between them (``routes``: the matcher's
+    :class:`~selfnav.roads.routes.RouteCache`, for its adjacency arrays). Returns ``(point,
+    seg, along, match_p, restart, placed)`` (copies; ``placed`` marks the epochs moved); an
+    outlier at a track's end, or without such a route, keeps its match."""
+    from selfnav.roads.routes import points_along_route, segment_lookup
 
-    point, seg, along, restart = point.copy(), seg.copy(), along.copy(), restart.copy()
+    point, seg, along = point.copy(), seg.copy(), along.copy()
+    match_p, restart = match_p.copy(), restart.copy()
     n = len(point)
     out = np.hypot(*(xy - point).T) > k * sigma
     placed = np.zeros(n, bool)
     if not out.any():
-        return point, seg, along, restart, placed
-    arrays = graph.csr_arrays()
+        return point, seg, along, match_p, restart, placed
+    lookup = segment_lookup(graph)
     track = np.repeat(np.arange(len(bounds) - 1), np.diff(bounds))
     i = 0
     while i < n:
@@ -224,10 +227,11 @@ def outliers_on_route(t_in, t_out, xy, point, seg, along, sigma, restart, bounds
                 if reach is not None:
                     limit = min(limit, float(np.hypot(*(point[b] - point[a]))) + reach[a])
                 r = points_along_route(graph, seg[a], along[a], seg[b], along[b], fr,
-                                       limit=limit, arrays=arrays)
+                                       limit=limit, routes=routes, lookup=lookup)
                 if r is not None:
                     point[i:b], seg[i:b], along[i:b] = r
+                    match_p[i:b] = min(match_p[a], match_p[b])
                     placed[i:b] = True
                     restart[i:b + 1] = False
         i = j + 1
-    return point, seg, along, restart, placed
+    return point, seg, along, match_p, restart, placed

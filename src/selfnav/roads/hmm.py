@@ -492,16 +492,10 @@ class HmmMatcher:
         restart = d["back"][d["path"]] < 0
         mseg = d["seg"][d["path"]]
         if self.outlier_k is not None:
-            point, mseg, along, restart, placed = outliers_on_route(
-                ep.t_in, ep.t_out, ep.xy, point, mseg, along, ep.sigma, restart, ep.bounds, g,
-                k=self.outlier_k, max_speed=self.max_speed, reach=self.cut * beta_e)
-            # the outlier's point stands on its neighbours' route: as sure as the less sure
-            if placed.any():
-                prev = np.flatnonzero(~placed)
-                lo = prev[np.clip(np.searchsorted(prev, np.flatnonzero(placed)) - 1, 0, None)]
-                hi = prev[np.clip(np.searchsorted(prev, np.flatnonzero(placed)), None,
-                                  len(prev) - 1)]
-                match_p[placed] = np.minimum(match_p[lo], match_p[hi])
+            point, mseg, along, match_p, restart, _ = outliers_on_route(
+                ep.t_in, ep.t_out, ep.xy, point, mseg, along, match_p, ep.sigma, restart,
+                ep.bounds, g, k=self.outlier_k, max_speed=self.max_speed,
+                reach=self.cut * beta_e, routes=self.cache)
         piece = np.cumsum(restart) - 1
         # alone in its piece of chain (in a track of two epochs or more)
         lone = (np.bincount(piece)[piece] < 2) & np.repeat(np.diff(ep.bounds) >= 2,

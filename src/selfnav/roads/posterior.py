@@ -123,7 +123,8 @@ def calibration_features(p, moved_sigma, n_fixes):
     p = np.asarray(p, float)
     z = np.log(np.clip(p, P_EPS, 1.0)) - np.log(np.clip(1.0 - p, P_EPS, 1.0))
     end = np.zeros(len(p))
-    end[[0, -1]] = 1.0 if len(p) else 0.0
+    if len(p):
+        end[[0, -1]] = 1.0
     return np.column_stack([z, np.log1p(np.asarray(moved_sigma, float)), end,
                             np.full(len(p), np.log(max(n_fixes, 1)))])
 

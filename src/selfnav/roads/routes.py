@@ -439,7 +439,9 @@ def transition_route_distance(graph: RoadGraph, cand: Candidates, i, j, *, backt
 
 def _path(indptr, indices, weights, src: int, dst: int, limit: float) -> list:
     """Nodes of the shortest route ``src -> dst`` within ``limit`` m (Dijkstra on a heap,
-    settling only the neighbourhood the bound allows); [] where there is none."""
+    settling only the neighbourhood the bound allows); [] where there is none. For the few
+    outliers of a match: :func:`route_nodes` would import scipy on the matcher's path (its
+    start-up), and :class:`RouteCache` keeps distances, not predecessors."""
     import heapq
 
     dist, pred, done = {src: 0.0}, {src: -1}, set()
@@ -463,26 +465,29 @@ def _path(indptr, indices, weights, src: int, dst: int, limit: float) -> list:
 
 
 def points_along_route(graph: RoadGraph, seg_a, along_a, seg_b, along_b, fractions, *,
-                       limit=np.inf, arrays=None):
+                       limit=np.inf, routes=None, lookup=None):
     """Road positions at ``fractions`` (0 … 1) of the shortest route's length from the road
     position ``(seg_a, along_a)`` to ``(seg_b, along_b)``: ``(xy (K, 2), seg (K,), along
     (K,))``, or None where no route exists within ``limit`` m (from the end node of
     ``seg_a`` to the start node of ``seg_b``, as the matcher bounds a transition's route).
-    ``arrays``: the graph's
-    :meth:`~selfnav.roads.graph.RoadGraph.csr_arrays` (computed when not given)."""
+    ``routes``: a :class:`RouteCache` of the graph (its adjacency arrays are used) and
+    ``lookup``: :func:`segment_lookup` of the graph, for many calls (built when not given)."""
     seg_a, seg_b = int(seg_a), int(seg_b)
     fr = np.clip(np.asarray(fractions, float), 0.0, 1.0)
     if seg_a == seg_b and along_b >= along_a:
         segs, starts = np.array([seg_a]), np.array([along_a])
         lens = np.array([along_b - along_a])
     else:
-        w, idx, ptr = arrays if arrays is not None else graph.csr_arrays()
+        if routes is not None:
+            ptr, idx, w = routes.indptr, routes.indices, routes.weights
+        else:
+            w, idx, ptr = graph.csr_arrays()
         nodes = _path(ptr, idx, w, int(graph.seg_v[seg_a]), int(graph.seg_u[seg_b]),
                       float(limit))
         if not nodes:
             return None
-        mid = segment_lookup(graph)(nodes[:-1], nodes[1:]) if len(nodes) > 1 else \
-            np.zeros(0, np.int64)
+        lookup = lookup if lookup is not None else segment_lookup(graph)
+        mid = lookup(nodes[:-1], nodes[1:]) if len(nodes) > 1 else np.zeros(0, np.int64)
         segs = np.concatenate([[seg_a], mid, [seg_b]]).astype(np.int64)
         lens = np.concatenate([[graph.seg_len[seg_a] - along_a], graph.seg_len[mid],
                                [along_b]])
