@@ -16,13 +16,14 @@ All tracks are simulated (a car driving the real OpenStreetMap extracts shipped 
 
     python benchmarks/bench_mapmatch.py                 # everything (~20 min on 2 cores)
     python benchmarks/bench_mapmatch.py fmm fleet e2e memory dask   # some sections
-    python benchmarks/bench_mapmatch.py real calibrate acceptance e2e_fmm memory   # issue 21
+    python benchmarks/bench_mapmatch.py real calibrate heldout acceptance e2e_fmm memory   # 21
     (also: graphs, tracks, outliers; simulated fleets are cached in $SELFNAV_BENCH_CACHE,
     default /tmp/selfnav_bench)
 
 Issue 21: fleets with the properties of a real floating-car fleet (``real``: short tracks,
 unjoined ways, multipath; tuning, reporting and fresh seeds apart), the calibration of
-``match_p`` on the tuning seed (``calibrate``), the issue-14 acceptance fleets as before
+``match_p`` on the tuning seed (``calibrate``), ``match_p`` and per-track accuracy on seeds
+never drawn while building it (``heldout``), the issue-14 acceptance fleets as before
 (``acceptance``), and ``selfnav match`` end to end side by side with FMM (``e2e_fmm``).
 """
 import json
@@ -174,7 +175,7 @@ def _longest_run(mask):
 # ------------------------------------------------------------------ issue 14: fleets, FMM
 CACHE = Path(os.environ.get("SELFNAV_BENCH_CACHE", tempfile.gettempdir())) / "selfnav_bench"
 SECTIONS = ("graphs", "tracks", "outliers", "fmm", "fleet", "e2e", "memory", "dask", "real",
-            "calibrate", "acceptance", "e2e_fmm")
+            "calibrate", "heldout", "acceptance", "e2e_fmm")
 
 
 def load():
@@ -633,7 +634,8 @@ def _reliability(p, ok, edges=P_EDGES):
 def _raw_matches(truth, tracks, map_path, d):
     """One fleet call as :func:`fleet_run` with ``match_p`` left as the model's posterior;
     per fix of the matcher (repeated stamps merged): the regressors of the calibration
-    (:func:`selfnav.roads.posterior.calibration_features`) and "within 5 m of the route"."""
+    (:func:`selfnav.roads.posterior.calibration_features`), "within 5 m of the route", and
+    the number of fixes of each track (in order)."""
     import selfnav.roads.fleet as fleet_mod
     from selfnav.roads.posterior import calibration_features
 
@@ -657,7 +659,7 @@ def _raw_matches(truth, tracks, map_path, d):
         fleet_mod.MatchParams.matcher, fleet_mod.match_batch = orig, orig_batch
         fleet_mod._MATCHERS.clear()
     by = {tr.track_id: tr for tr in tracks}
-    xs, oks = [], []
+    xs, oks, sizes = [], [], []
     for tm in seen:
         r = tm.result
         if r is None:
@@ -666,7 +668,8 @@ def _raw_matches(truth, tracks, map_path, d):
         _, c, _ = project_to_polyline(np.column_stack([x, y]), by[tm.track_id].polyline)
         xs.append(calibration_features(r.match_p, r.moved / r.sigma, len(r.t)))
         oks.append(np.abs(c) < 5.0)
-    return np.concatenate(xs), np.concatenate(oks)
+        sizes.append(len(r.t))
+    return np.concatenate(xs), np.concatenate(oks), np.asarray(sizes)
 
 
 def section_calibrate(graphs):
@@ -689,7 +692,7 @@ def section_calibrate(graphs):
                 for sig in BANDS.values():
                     tracks = simulate_real_fleet(truth, 263, seed=seed, sigma=sig)
                     for mp in (packaged_map(name), unj):
-                        x, ok = _raw_matches(truth, tracks, mp, d)
+                        x, ok, _ = _raw_matches(truth, tracks, mp, d)
                         xs.append(x)
                         oks.append(ok)
     F, ok = np.concatenate(xs), np.concatenate(oks).astype(float)
@@ -714,6 +717,55 @@ def section_calibrate(graphs):
     for thr in (0.95, 0.96, 0.97, 0.98, 0.99):
         sel = q >= thr
         print(f"| {thr:.2f} | {100 * ok[sel].mean():.2f} % | {100 * sel.mean():.1f} % |")
+
+
+#: seeds never drawn while the matcher and its calibration were built (stop 56)
+HELDOUT_SEEDS = ((5, 6), (7, 8, 9, 10))
+
+
+def section_heldout(graphs):
+    """Issue 21: ``match_p`` and per-track accuracy on fleets never drawn while building the
+    matcher (``HELDOUT_SEEDS``; σ 1-4 m, both maps, both map forms), per fix of the matcher
+    (repeated stamps merged): the calibrated ``match_p`` (the matcher's own
+    :func:`selfnav.roads.posterior.calibrate` of its posterior) by range against the share
+    within 5 m of the route, and the per-track mean within 5 m per fleet."""
+    from selfnav.roads.hmm import MATCH_P_COEF
+    from selfnav.roads.posterior import calibrate
+    from selfnav.sim.fleet import simulate_real_fleet, unjoin_map
+
+    print(f"\n## Held-out fleets (seeds {HELDOUT_SEEDS}; load {load():.1f})\n")
+    print("| seeds | match_p < 0.95: mean → right (fixes) | 0.95–0.99 | ≥ 0.99 | per track, "
+          "by fleet (map, form, seed) |")
+    print("| --- | --- | --- | --- | --- |")
+    sig = BANDS["σ 1-4 m"]
+    for group in HELDOUT_SEEDS:
+        qs, oks, tracks_ok = [], [], []
+        for name in graphs:
+            truth = read_roads(packaged_map(name), strongly_connected=False)
+            with tempfile.TemporaryDirectory() as d:
+                for seed in group:
+                    unj = Path(d) / f"unjoined_{seed}.osm"
+                    unjoin_map(packaged_map(name), unj, seed=seed)
+                    tracks = simulate_real_fleet(truth, 263, seed=seed, sigma=sig)
+                    for form, mp in (("shipped", packaged_map(name)), ("unjoined", unj)):
+                        X, ok, sizes = _raw_matches(truth, tracks, mp, d)
+                        p = 1.0 / (1.0 + np.exp(-X[:, 0]))          # the posterior again
+                        cuts = np.r_[0, np.cumsum(sizes)]
+                        q = np.concatenate([calibrate(p[a:b], np.expm1(X[a:b, 1]), b - a,
+                                                      MATCH_P_COEF)
+                                            for a, b in zip(cuts[:-1], cuts[1:])])
+                        qs.append(q)
+                        oks.append(ok)
+                        share = [ok[a:b].mean() for a, b in zip(cuts[:-1], cuts[1:])]
+                        tracks_ok.append(f"{name[:4]} {form[:4]} {seed}: "
+                                         f"{100 * np.mean(share):.2f}")
+        q, ok = np.concatenate(qs), np.concatenate(oks)
+        cells = []
+        for lo, hi in ((0.0, 0.95), (0.95, 0.99), (0.99, 1.01)):
+            sel = (q >= lo) & (q < hi)
+            cells.append(f"{q[sel].mean():.3f} → {100 * ok[sel].mean():.1f} % ({sel.sum()})")
+        print(f"| {', '.join(map(str, group))} | {' | '.join(cells)} | "
+              f"{'; '.join(tracks_ok)} |", flush=True)
 
 
 def section_acceptance(graphs):
