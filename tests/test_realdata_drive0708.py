@@ -55,9 +55,10 @@ def test_cli_defaults_on_clean_rtk(drive, tmp_path, capsys):
     assert s["imu_time_offset_format_s"] == -0.125
     assert len(s["lever_arm_m"]) == 3 and max(map(abs, s["lever_arm_m"])) < 0.5
     assert s["fix_status"]["rejected"] == 0 and s["position_of"] == "antenna"
-    # a car moving along its nose: its sideways constraint is never found slipping (σ_eff
-    # measured 0.31 m/s at most; the warning needs 4 × 0.5 m/s in two windows in a row)
+    # a car moving along its nose: its sideways constraint is never found slipping nor
+    # widened (σ_eff measured 0.31 m/s at most; widening needs an RMS beyond 0.4 × 0.5 m/s)
     assert s["nhc_check"]["slip_seen_s"] is None and s["nhc_check"]["largest_sigma_mps"] < 1.0
+    assert s["nhc_check"]["largest_widening"] == [1.0, 1.0]
     code, out, err = run_cli(["evaluate", "--truth", d / "gnss_1934_sf.pos", "--solution", sol,
                               "--json"], capsys)
     assert code == 0, err

@@ -148,6 +148,7 @@ class FaultBank:
         ig = cfg.integrity
         self.gate = chi2_gate(2, ig.p_false_alarm)
         self.fix_dt = 1.0               # the fixes' interval (the navigator keeps it current)
+        self.nhc_scale = np.ones(2)     # the constraint's σ over the configured (lateral, up)
         self.diag = None                # a list to collect (t, age, q_fix, q_sep, sep, κ) in
         self.k_pl = normal_quantile(ig.integrity_risk)
         self.refs: list[Reference] = []
@@ -251,8 +252,9 @@ class FaultBank:
                 # to date in between (σ ∝ 1/√span: two updates 0.02 s apart, seen every other
                 # second, had given the dead reckoning up to twice the information across)
                 k = np.sqrt(max(1.0, self.cfg.integrity.reference_step_s / max(span, 1e-6)))
-                f.update(NonHolonomic(k * veh.nhc_sigma,
-                                      k * (veh.nhc_sigma_up or veh.nhc_sigma)).model(f))
+                f.update(NonHolonomic(k * veh.nhc_sigma * self.nhc_scale[0],
+                                      k * (veh.nhc_sigma_up or veh.nhc_sigma)
+                                      * self.nhc_scale[1]).model(f))
 
     def maintain(self, t, flt, *, resolving: bool = False):
         """Branch a new reference from ``M`` every ``branch_every_s`` while the GNSS is healthy;
