@@ -856,12 +856,19 @@ class Navigator:
 
         from selfnav.errors import SelfnavWarning
 
-        ch = self.nhc_check
-        warnings.warn(f"at {t:.0f} s: the platform slips sideways — the sideways constraint's "
-                      f"innovations are {ch.seen[1]:.2f} m/s RMS over the last 30 s against its "
-                      f"σ {self.cfg.vehicle.nhc_sigma:g} (a car leaves a fifth of it): its σ "
-                      f"follows them, up to {ch.widen:g}× (a hull yawing in the waves: "
-                      f"--platform boat; --no-nhc drops it)", SelfnavWarning, stacklevel=4)
+        ch, veh = self.nhc_check, self.cfg.vehicle
+        if ch.scale[0] > 1.0:
+            why = (f"the platform slips sideways — the sideways constraint's innovations are "
+                   f"{ch.seen[1]:.2f} m/s RMS over the last 30 s against its σ "
+                   f"{veh.nhc_sigma:g} (a car leaves a fifth of it): its σ follows them, up to "
+                   f"{ch.widen:g}× (a hull yawing in the waves: --platform boat; --no-nhc drops "
+                   f"it)")
+        else:
+            why = (f"the vertical constraint's innovations are {ch.seen[3]:.2f} m/s RMS over "
+                   f"the last 30 s against its σ {veh.nhc_sigma_up or veh.nhc_sigma:g}: its σ "
+                   f"follows them, up to {ch.widen:g}× (an IMU pitched on the vehicle: "
+                   f"--imu-mount; a platform that pitches or heaves)")
+        warnings.warn(f"at {t:.0f} s: {why}", SelfnavWarning, stacklevel=4)
 
     def _aid_epoch(self, te):
         flt, veh = self.flt, self.cfg.vehicle
