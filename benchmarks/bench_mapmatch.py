@@ -672,6 +672,24 @@ def _raw_matches(truth, tracks, map_path, d):
     return np.concatenate(xs), np.concatenate(oks), np.asarray(sizes)
 
 
+def _real_fleets_raw(graphs, seeds, sigmas):
+    """``(map name, seed, "shipped" | "unjoined", features, within 5 m, track sizes)`` of
+    :func:`_raw_matches` for the real-like fleet of each map, seed and noise band, matched on
+    the shipped map and on its unjoined form."""
+    from selfnav.sim.fleet import simulate_real_fleet, unjoin_map
+
+    for name in graphs:
+        truth = read_roads(packaged_map(name), strongly_connected=False)
+        with tempfile.TemporaryDirectory() as d:
+            for seed in seeds:
+                unj = Path(d) / f"unjoined_{seed}.osm"
+                unjoin_map(packaged_map(name), unj, seed=seed)
+                for sig in sigmas:
+                    tracks = simulate_real_fleet(truth, 263, seed=seed, sigma=sig)
+                    for form, mp in (("shipped", packaged_map(name)), ("unjoined", unj)):
+                        yield (name, seed, form) + tuple(_raw_matches(truth, tracks, mp, d))
+
+
 def section_calibrate(graphs):
     """Issue 21: the calibration of match_p, fitted on the tuning seed only: the fleets of
     ``real`` (both noise bands, both maps, both map forms) matched with the model's posterior
@@ -679,22 +697,11 @@ def section_calibrate(graphs):
     posterior's log odds, the fix's distance from its road in σ, the track's end and its
     length (:func:`selfnav.roads.posterior.calibrate`); the flag's precision against its
     threshold."""
-    from selfnav.sim.fleet import simulate_real_fleet, unjoin_map
-
     print(f"\n## Calibration of match_p on the tuning seed {TUNE_SEEDS} (load {load():.1f})\n")
     xs, oks = [], []
-    for name in graphs:
-        truth = read_roads(packaged_map(name), strongly_connected=False)
-        with tempfile.TemporaryDirectory() as d:
-            for seed in TUNE_SEEDS:
-                unj = Path(d) / f"unjoined_{seed}.osm"
-                unjoin_map(packaged_map(name), unj, seed=seed)
-                for sig in BANDS.values():
-                    tracks = simulate_real_fleet(truth, 263, seed=seed, sigma=sig)
-                    for mp in (packaged_map(name), unj):
-                        x, ok, _ = _raw_matches(truth, tracks, mp, d)
-                        xs.append(x)
-                        oks.append(ok)
+    for _, _, _, x, ok, _ in _real_fleets_raw(graphs, TUNE_SEEDS, BANDS.values()):
+        xs.append(x)
+        oks.append(ok)
     F, ok = np.concatenate(xs), np.concatenate(oks).astype(float)
     X = np.column_stack([F, np.ones(len(F))])
     w = np.zeros(X.shape[1])
@@ -731,7 +738,6 @@ def section_heldout(graphs):
     within 5 m of the route, and the per-track mean within 5 m per fleet."""
     from selfnav.roads.hmm import MATCH_P_COEF
     from selfnav.roads.posterior import calibrate
-    from selfnav.sim.fleet import simulate_real_fleet, unjoin_map
 
     print(f"\n## Held-out fleets (seeds {HELDOUT_SEEDS}; load {load():.1f})\n")
     print("| seeds | match_p < 0.95: mean → right (fixes) | 0.95–0.99 | ≥ 0.99 | per track, "
@@ -740,25 +746,15 @@ def section_heldout(graphs):
     sig = BANDS["σ 1-4 m"]
     for group in HELDOUT_SEEDS:
         qs, oks, tracks_ok = [], [], []
-        for name in graphs:
-            truth = read_roads(packaged_map(name), strongly_connected=False)
-            with tempfile.TemporaryDirectory() as d:
-                for seed in group:
-                    unj = Path(d) / f"unjoined_{seed}.osm"
-                    unjoin_map(packaged_map(name), unj, seed=seed)
-                    tracks = simulate_real_fleet(truth, 263, seed=seed, sigma=sig)
-                    for form, mp in (("shipped", packaged_map(name)), ("unjoined", unj)):
-                        X, ok, sizes = _raw_matches(truth, tracks, mp, d)
-                        p = 1.0 / (1.0 + np.exp(-X[:, 0]))          # the posterior again
-                        cuts = np.r_[0, np.cumsum(sizes)]
-                        q = np.concatenate([calibrate(p[a:b], np.expm1(X[a:b, 1]), b - a,
-                                                      MATCH_P_COEF)
-                                            for a, b in zip(cuts[:-1], cuts[1:])])
-                        qs.append(q)
-                        oks.append(ok)
-                        share = [ok[a:b].mean() for a, b in zip(cuts[:-1], cuts[1:])]
-                        tracks_ok.append(f"{name[:4]} {form[:4]} {seed}: "
-                                         f"{100 * np.mean(share):.2f}")
+        for name, seed, form, X, ok, sizes in _real_fleets_raw(graphs, group, (sig,)):
+            p = 1.0 / (1.0 + np.exp(-X[:, 0]))          # the posterior again
+            cuts = np.r_[0, np.cumsum(sizes)]
+            q = np.concatenate([calibrate(p[a:b], np.expm1(X[a:b, 1]), b - a, MATCH_P_COEF)
+                                for a, b in zip(cuts[:-1], cuts[1:])])
+            qs.append(q)
+            oks.append(ok)
+            share = [ok[a:b].mean() for a, b in zip(cuts[:-1], cuts[1:])]
+            tracks_ok.append(f"{name[:4]} {form[:4]} {seed}: {100 * np.mean(share):.2f}")
         q, ok = np.concatenate(qs), np.concatenate(oks)
         cells = []
         for lo, hi in ((0.0, 0.95), (0.95, 0.99), (0.99, 1.01)):
