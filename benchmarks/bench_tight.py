@@ -6,6 +6,12 @@ docs/gnss.md.
     python benchmarks/bench_tight.py            # causal and smoothed, ~20 s
     python benchmarks/bench_tight.py --drift    # + issue 23's drift injected 24 ways, ~5 min
     python benchmarks/bench_tight.py --city 24  # + 24 SIMULATED city drives, ~4 min
+    python benchmarks/bench_tight.py --timeline # + the first 90 s, every 5 s, ~10 s
+
+``--timeline``: the causal solution of both files in its first 90 s — error, heading against
+the true course (from the ground truth's positions), yaw-rate bias and speed scale — started
+by the heading bank (the default) and with the true course given as the start heading
+(σ 5°): where the RTKLIB file's causal error comes from (docs/gnss.md).
 
 ``--drift``: every pseudorange moved as by a receiver displaced 0.5 m/s (towards North, East,
 South, West) from 40, 80 or 120 s for 120 s, then held; error against the dead-reckoning bound
@@ -143,14 +149,46 @@ def city(n):
           f"of {n} drives (Λ up to {a[:, 7].max():.0f})")
 
 
+def timeline():
+    import math
+
+    for name in FILES:
+        inp, gt = find_smartloc_files(DATA / name)
+        prs, odo = read_smartloc_input(inp)
+        truth = read_smartloc_truth(gt)
+        for given in (False, True):
+            r = run_tight(prs, odo)
+            e, g = errors(r, truth)
+            east, north = (np.interp(r.t, truth.t, g[:, i]) for i in (0, 1))
+            course = np.degrees(np.arctan2(np.gradient(east, r.t), np.gradient(north, r.t)))
+            if given:
+                r = run_tight(prs, odo, heading0=(math.radians(course[0]), math.radians(5.0)))
+                e, _ = errors(r, truth)
+            print(f"\n{name.replace('smartloc_berlin_', '')}, start "
+                  f"{'given the true course' if given else 'by the heading bank'}: RMS "
+                  f"{np.sqrt(np.mean(e ** 2)):.2f} m\n")
+            print("| t s | error m | σ_h m | heading − course ° | yaw-rate bias °/s | scale |")
+            print("| ---: | ---: | ---: | ---: | ---: | ---: |")
+            t = r.t - r.t[0]
+            for a in np.arange(0.0, 90.0, 5.0):
+                k = int(np.searchsorted(t, a))
+                d = (np.degrees(r.heading[k]) - course[k] + 180.0) % 360.0 - 180.0
+                print(f"| {t[k]:.1f} | {e[k]:.1f} | {r.sigma_h[k]:.2f} | {d:+.1f} | "
+                      f"{np.degrees(r.yaw_bias[k]):+.3f} | {r.scale[k]:.3f} |")
+
+
 if __name__ == "__main__":
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--drift", action="store_true", help="the drift-injection scan (~5 min)")
     ap.add_argument("--city", type=int, default=0, metavar="N",
                     help="N SIMULATED city drives (~10 s each)")
+    ap.add_argument("--timeline", action="store_true",
+                    help="the first 90 s of the causal solution, bank or true course (~10 s)")
     args = ap.parse_args()
     table()
     if args.drift:
         drift_scan()
     if args.city:
         city(args.city)
+    if args.timeline:
+        timeline()

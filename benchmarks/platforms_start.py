@@ -5,6 +5,7 @@ first fix, and how well does it follow — SIMULATED data (selfnav.simulate).
     python benchmarks/platforms_start.py --clean [--seeds 40 41 42] [--mode profile|auto]
     python benchmarks/platforms_start.py --rtk-walk [--seeds 40 41 42]
     python benchmarks/platforms_start.py --ship [--seeds 1 2]
+    python benchmarks/platforms_start.py --wobble [--seeds 1 2 3 4 5]
 
 Per platform and start (at rest / moving): seconds from the first fix to the start, the start
 kind and heading source, horizontal RMS (and the fixes' σ) and heading RMS over the whole
@@ -20,6 +21,12 @@ off: the issue's "clean"), RMS from a minute after the start against the fixes' 
 walker standing 30 s first — with ``--platform pedestrian`` and with ``--no-nhc``, outages of
 10 s every 30 s from 30 s after the start. ``--ship``: the ``ship`` scenario (yaw ±5° about its
 course at 6 m/s) with the defaults, ``--no-nhc`` and ``--platform boat``.
+
+``--wobble``: could the raw gyros tell a hull from a car when the defaults start? The ship
+scenario and the built-in car (consumer, industrial, tactical) with the defaults; over the
+IMU before the start (at most 30 s), the gyro rates split into the part about gravity (the mean
+specific force) and the part across it, integrated and detrended by a quadratic: the RMS of
+the tilt and of the heading left (a hull rocks and yaws in the waves; a car turns).
 """
 from __future__ import annotations
 
@@ -148,6 +155,37 @@ def ship(seeds):
                   f"{ev['heading_rms_deg']:.1f} |", flush=True)
 
 
+def wobble_deg(imu, t_end, window=30.0):
+    """Tilt and heading wobble (RMS °) of the IMU over ``window`` s before ``t_end`` and the
+    span used (s): the rates about gravity and across it, integrated, less a quadratic."""
+    m = (imu.t > t_end - window) & (imu.t <= t_end)
+    t, w = imu.t[m], imu.omega_ib_b[m]
+    up = imu.f_ib_b[m].mean(axis=0)
+    up /= np.linalg.norm(up)
+    w_up = w @ up
+    angle = np.cumsum(np.column_stack([w - np.outer(w_up, up), w_up])
+                      * np.diff(t, prepend=t[0])[:, None], axis=0)
+    A = np.vander((t - t.mean()) / window, 3)
+    left = angle - A @ np.linalg.lstsq(A, angle, rcond=None)[0]
+    return (np.degrees(np.sqrt(np.mean(np.sum(left[:, :3] ** 2, axis=1)))),
+            np.degrees(np.sqrt(np.mean(left[:, 3] ** 2))), t[-1] - t[0])
+
+
+def wobble(seeds):
+    print("| platform | seed | start s | IMU before it s | tilt wobble ° | heading wobble ° |")
+    print("| --- | ---: | ---: | ---: | ---: | ---: |")
+    runs = [("ship", "ship", s) for s in seeds] + [
+        (f"car, {g}", {"scenario": {"kind": "car", "duration": 200}, "imu": {"grade": g}}, s)
+        for g in ("consumer", "industrial", "tactical") for s in seeds]
+    for label, spec, seed in runs:
+        sim = selfnav.simulate(spec, seed=seed, duration=120 if spec == "ship" else None)
+        sol = _navigate(sim.imu, sim.gnss.as_gnss(), {})
+        t0 = sol.stats["start_s"]
+        tilt, yaw, span = wobble_deg(sim.imu, t0)
+        print(f"| {label} | {seed} | {t0:.0f} | {span:.0f} | {tilt:.2f} | {yaw:.2f} |",
+              flush=True)
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--seeds", type=int, nargs="+", default=None)
@@ -156,6 +194,7 @@ def main():
     ap.add_argument("--rtk-walk", action="store_true")
     ap.add_argument("--ship", action="store_true")
     ap.add_argument("--clean", action="store_true")
+    ap.add_argument("--wobble", action="store_true")
     a = ap.parse_args()
     if a.clean:
         return clean(a.seeds or [40, 41, 42], a.duration if a.duration != 300.0 else 240.0,
@@ -164,6 +203,8 @@ def main():
         return rtk_walk(a.seeds or [40, 41, 42])
     if a.ship:
         return ship(a.seeds or [1, 2])
+    if a.wobble:
+        return wobble(a.seeds or [1, 2, 3, 4, 5])
     print("| platform | start | seed | start after 1st fix s | kind / heading | horizontal RMS m "
           "(fix σ) | from 60 s after the start | heading RMS ° | from 60 s after | outage ends "
           "max m | CPU s |")
