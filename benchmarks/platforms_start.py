@@ -26,13 +26,16 @@ course at 6 m/s) with the defaults, ``--no-nhc`` and ``--platform boat``.
 scenario and the built-in car (consumer, industrial, tactical) with the defaults; over the
 IMU before the start (at most 30 s), the gyro rates split into the part about gravity (the mean
 specific force) and the part across it, integrated and detrended by a quadratic: the RMS of
-the tilt and of the heading left (a hull rocks and yaws in the waves; a car turns).
+the tilt and of the heading left (a hull rocks and yaws in the waves; a car turns); and the
+real drive_0708 (when ``../shared/data`` has it), every window where it moves and does not
+turn.
 """
 from __future__ import annotations
 
 import argparse
 import time
 import warnings
+from pathlib import Path
 
 import numpy as np
 
@@ -184,6 +187,22 @@ def wobble(seeds):
         tilt, yaw, span = wobble_deg(sim.imu, t0)
         print(f"| {label} | {seed} | {t0:.0f} | {span:.0f} | {tilt:.2f} | {yaw:.2f} |",
               flush=True)
+    real = Path(__file__).resolve().parents[2] / "shared" / "data" / "rtklibexplorer_drive_0708"
+    if not real.exists():
+        return
+    # a real car: every window of the drive (every 2 s) where it moves and does not turn
+    imu, gnss = selfnav.read_imu(real / "imu_1934.csv"), selfnav.read_gnss(real / "gnss_1934_sf.pos")
+    speed = np.hypot(*gnss.velocity_n[:, :2].T)
+    print("\n| real drive_0708, window s | windows moving (> 3 m/s), heading wobble < 1° | "
+          "their largest tilt wobble ° |")
+    print("| ---: | ---: | ---: |")
+    for window in (8.0, 15.0, 30.0):
+        calm = []
+        for t_end in np.arange(imu.t[0] + window, imu.t[-1], 2.0):
+            tilt, yaw, _ = wobble_deg(imu, t_end, window)
+            if yaw < 1.0 and np.interp(t_end, gnss.t, speed) > 3.0:
+                calm.append(tilt)
+        print(f"| {window:.0f} | {len(calm)} | {max(calm):.2f} |")
 
 
 def main():

@@ -288,3 +288,28 @@ def test_cli_map_hook(files, capsys, monkeypatch):
     assert main(args) == 2
     err = capsys.readouterr().err.strip()
     assert "selfnav.roads.graph" in err and "\n" not in err
+
+
+def test_a_solution_in_radians_is_named_so_by_evaluate(tmp_path):
+    """A truth or solution file whose lat_deg/lon_deg hold radians reads as a track near
+    0° N 0° E, thousands of km from the other file: evaluate's reader says what the values look
+    like (as navigate's and match's GNSS readers do); degrees read without the warning."""
+    import warnings
+
+    from selfnav.errors import SelfnavWarning
+    from selfnav.io.trajectory import read_truth
+
+    t = np.arange(30.0)
+    lat, lon = LAT0 + 1e-6 * t, LON0 + 1e-6 * t
+    for values, expect in (((lat, lon), 1), ((np.degrees(lat), np.degrees(lon)), 0)):
+        p = tmp_path / f"sol{expect}.csv"
+        p.write_text("t,lat_deg,lon_deg,h_m\n" + "".join(
+            f"{a},{b:.10f},{c:.10f},20\n" for a, b, c in zip(t, *values)))
+        with warnings.catch_warnings(record=True) as got:
+            warnings.simplefilter("always")
+            tr = read_truth(p)
+        hits = [w for w in got if issubclass(w.category, SelfnavWarning)
+                and "look like radians" in str(w.message)]
+        assert len(hits) == expect
+        assert str(p) in str(hits[0].message) if hits else True
+        assert len(tr.t) == 30

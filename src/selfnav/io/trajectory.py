@@ -2,11 +2,14 @@
 ``ve, vn, vu, roll_deg, pitch_deg, heading_deg``."""
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 
 from selfnav import attitude as att
-from selfnav.errors import InputError
+from selfnav.errors import InputError, SelfnavWarning
 from selfnav.io.csvio import check_time, read_table, write_csv
+from selfnav.io.fleet import radians_hint
 from selfnav.io.gnss import read_rtklib_pos
 from selfnav.io.psins_mat import AVP_COLUMNS, header_of, read_avp_csv
 from selfnav.types import Trajectory
@@ -67,6 +70,9 @@ def read_truth(path) -> Trajectory:
         k = int(np.argmax(np.abs(lat) > np.pi / 2))
         raise InputError(path, "latitude outside ±90°: columns swapped or not degrees?",
                          row=int(tab["_lines"][k]), column="lat_deg")
+    hint = radians_hint(tab["lat_deg"], tab["lon_deg"])
+    if hint:
+        warnings.warn(f"{path}: {hint}", SelfnavWarning, stacklevel=2)
     n = len(t)
     nan3 = np.full((n, 3), np.nan)
     v = np.column_stack([tab[k] for k in ("ve", "vn", "vu")]) if all(
