@@ -17,11 +17,15 @@ makes); only the GNSS is edited:
 * ``--latency``: the real-time loop with each fix handed over 0, 0.2, 0.5 s after the IMU
   reaches its time (a receiver's latency; 0.5 s with the offset given, −0.2 s, so that every
   fix comes late);
+* ``--stress [N]``: N (40) windows drawn at random beyond the scan's design — white,
+  Gauss–Markov, drag or second-order drift; 60–300 s; σ 50, 200 or 500 m; the velocity
+  dropped, kept clean, or carrying the corruption's own rate (a spoofer that fools both) —
+  each against the same window with no GNSS, the scan's acceptance;
 * ``--cut``: causality — the files cut at several times T, the rows up to T against the whole
   run's (with and without a drag after T);
 * ``--stream``: :class:`selfnav.Navigator` fed one IMU sample a call against the batch call.
 
-    python experiments/drive_0708.py [DATA_FOLDER] [--grades] [--scan [--heldout] [-v]] [--cut] [--latency] [--stream]
+    python experiments/drive_0708.py [DATA_FOLDER] [--grades] [--scan [--heldout] [-v]] [--stress [N]] [--cut] [--latency] [--stream]
 """
 from __future__ import annotations
 
@@ -136,6 +140,59 @@ def placement_scan(folder=DEFAULT_FOLDER, kinds=SCAN_KINDS, starts=SCAN_STARTS, 
     return rows
 
 
+STRESS_KINDS = ("white", "gm", "drag", "drift")
+STRESS_VELOCITY = ("drop", "keep", "consistent")
+
+
+def stress_case(i):
+    """Draw ``i`` of the randomised corruption (``--stress``): kind, length, σ, start and what
+    the velocity does, from a generator of its own (``default_rng(1000 + i)``)."""
+    rng = np.random.default_rng(1000 + i)
+    return dict(i=i, kind=STRESS_KINDS[i % 4], duration=float(rng.choice([60, 120, 240, 300])),
+                start=float(rng.uniform(60, 420)), sigma=float(rng.choice([50, 200, 500])),
+                velocity=STRESS_VELOCITY[(i // 4) % 3], seed=int(rng.integers(1000)))
+
+
+def stress_one(i, folder=DEFAULT_FOLDER):
+    """One randomised window against the same window with no GNSS; ``(case, met, run
+    metrics, no-GNSS metrics)`` with the acceptance of the scan."""
+    import warnings
+
+    c = stress_case(i)
+    imu, truth = load(folder)
+    t0 = truth.t[0] + c["start"]
+    win = (t0, t0 + c["duration"])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        g = with_outliers(truth, t0, c["duration"], sigma=c["sigma"], kind=c["kind"],
+                          seed=c["seed"], velocity=c["velocity"])
+        r = metrics(selfnav.navigate(imu, g), truth, (), win)
+        none = truth.select(~((truth.t >= win[0]) & (truth.t < win[1])))
+        if c["velocity"] == "drop":
+            none.velocity_n = None
+            none.sigma_vel_mps = None
+        b = metrics(selfnav.navigate(imu, none), truth, (), win)
+    met = (r["window_max_m"] <= 1.5 * b["window_max_m"] + 5.0 and r["before_max_m"] <= 1.0
+           and r["after_rms_m"] <= 1.0)
+    return c, met, r, b
+
+
+def stress(n, folder=DEFAULT_FOLDER, workers=2):
+    """``n`` randomised windows (:func:`stress_case`) on two processes, one line each."""
+    from concurrent.futures import ProcessPoolExecutor
+
+    met = 0
+    with ProcessPoolExecutor(workers) as ex:
+        for c, ok, r, b in ex.map(stress_one, range(n), [folder] * n):
+            met += ok
+            print(f"{c['i']:3d} {c['kind']:5s} σ {c['sigma']:3.0f} m {c['duration']:3.0f} s from "
+                  f"{c['start']:5.1f} s, velocity {c['velocity']:10s}: window max "
+                  f"{r['window_max_m']:6.1f} m (no GNSS {b['window_max_m']:6.1f}), before "
+                  f"{r['before_max_m']:.2f}, after RMS {r['after_rms_m']:.2f}  "
+                  f"{'met' if ok else 'NOT MET'}", flush=True)
+    print(f"{met} of {n} met")
+
+
 def causality(folder=DEFAULT_FOLDER, cuts=(150.0, 300.0, 450.0), kind=None):
     """Largest difference (m) of the rows up to each cut time between the files cut there
     and the whole files (``kind``: a 3-minute corruption window starting at the cut)."""
@@ -231,7 +288,7 @@ def _fmt(name, m):
 
 
 def main(argv):
-    args = [a for a in argv[1:] if not a.startswith("-")]
+    args = [a for a in argv[1:] if not a.startswith("-") and not a.isdigit()]
     folder = Path(args[0]) if args else DEFAULT_FOLDER
     if "--scan" in argv:
         held = "--heldout" in argv      # placements and draws the defaults were not tuned on
@@ -242,6 +299,10 @@ def main(argv):
         print(f"{met} of {len(rows)} runs meet the acceptance; worst window max / bound "
               f"{worst:.2f}; worst before {max(r[5] for r in rows):.2f} m; worst after RMS "
               f"{max(r[6] for r in rows):.2f} m")
+        return
+    if "--stress" in argv:
+        k = argv.index("--stress")
+        stress(int(argv[k + 1]) if k + 1 < len(argv) and argv[k + 1].isdigit() else 40, folder)
         return
     if "--cut" in argv:
         print("clean, largest row difference before the cut (m):", causality(folder))

@@ -23,9 +23,16 @@ likelihood, Gaussian and linear in its parameters, so in closed form:
     drag;
 ``drift`` (rate σ ``r``)
     a ramp whose rate changes over ``fault_ramp_change_s`` (an acceleration of σ ``r`` over
-    it) and that wanders about its quadratic by the fault floor — a receiver drifting off
-    smoothly (a second-order Gauss–Markov error); without it the curvature of such a drift
-    was left to ``lost``, and drive_0708 restarted on the drifting fixes, 500 m off;
+    it) and wanders as a random walk of density ``r²/fault_ramp_change_s`` (its rate moves by
+    about ``r`` over that time): the offsets an integrated random walk about the ramp,
+    covariance ``q (m² M / 2 − m³ / 6)`` between fixes ``m ≤ M`` s before now — a receiver
+    drifting off smoothly (a critically damped second-order Gauss–Markov error, whose rate
+    is such a walk over seconds). Without it the curvature of such a drift was left to
+    ``lost``, and drive_0708 restarted on the drifting fixes, 500 m off; with a wander about
+    the quadratic of the fault floor (1 m, correlated over 10 s) in its place, the wander's
+    own cost at an RTK fix's 0.1 m (tens of nats) gave ``lost`` the run again: drive_0708
+    with a drift of σ 50 m (its velocities clean) was restarted on it and ran 53 m off for
+    minutes after it;
 ``lost``
     the fixes healthy, the dead reckoning off by much more than ``P`` says (offset σ
     ``lost_m``, rate σ ``lost_mps`` added to its prior): the INS, not the GNSS, failed.
@@ -137,15 +144,19 @@ def run_evidence(tt, o, sigma, p_ins, P_rvh, acc_sigma, q_v, ig, *, fix_sigma: f
             carry[f"Gauss–Markov {s:.3g} m / {tc:g} s"] = s * s * n / (1.0 + span / tc)
     age = max(float(fault_age), ig.fault_ramp_onset_s)
     # a drift is a drag that is smooth, not straight: its rate changes over
-    # ``fault_ramp_change_s`` and it wanders about its quadratic by the fault floor (a straight
-    # ramp left a second-order drift's curvature to the INS-lost hypothesis)
-    wander = np.kron(fix_sigma ** 2 * np.exp(-dtm / ig.fault_ramp_change_s), I2)
+    # ``fault_ramp_change_s`` — a random walk of the rate, so the offsets walk about the ramp
+    # as an integrated random walk back from now (a straight ramp left a second-order drift's
+    # curvature to the INS-lost hypothesis)
+    back = np.abs(tau)
+    near, far = np.minimum.outer(back, back), np.maximum.outer(back, back)
+    walk = near * near * far / 2.0 - near ** 3 / 6.0
     for r in ig.fault_ramp_mps:
         Sr = np.diag([r * age] * 2 + [r] * 2) ** 2
         each[f"ramp {r:g} m/s"] = _loglik(y, C0 + A[:, :4] @ Sr @ A[:, :4].T)
         carry[f"ramp {r:g} m/s"] = (r * ig.fault_ramp_onset_s) ** 2 * n
         Sd = np.diag([r * age] * 2 + [r] * 2 + [0.0] + [r / ig.fault_ramp_change_s] * 2) ** 2
-        each[f"drift {r:g} m/s"] = _loglik(y, C0 + A @ Sd @ A.T + wander)
+        q = r * r / ig.fault_ramp_change_s
+        each[f"drift {r:g} m/s"] = _loglik(y, C0 + A @ Sd @ A.T + np.kron(q * walk, I2))
         carry[f"drift {r:g} m/s"] = (r * ig.fault_ramp_onset_s) ** 2 * n
     fam = {}
     for k, v in each.items():
