@@ -17,15 +17,16 @@ makes); only the GNSS is edited:
 * ``--latency``: the real-time loop with each fix handed over 0, 0.2, 0.5 s after the IMU
   reaches its time (a receiver's latency; 0.5 s with the offset given, −0.2 s, so that every
   fix comes late);
-* ``--stress [N]``: N (40) windows drawn at random beyond the scan's design — white,
-  Gauss–Markov, drag or second-order drift; 60–300 s; σ 50, 200 or 500 m; the velocity
-  dropped, kept clean, or carrying the corruption's own rate (a spoofer that fools both) —
-  each against the same window with no GNSS, the scan's acceptance;
+* ``--stress [N] [--from K]``: N (40) windows drawn at random (draws K…) beyond the scan's
+  design — white, Gauss–Markov, drag or second-order drift; 60–300 s; σ 50, 200 or 500 m; the
+  velocity dropped, kept clean, or carrying the corruption's own rate (a spoofer that fools
+  both) — each against the same window with no GNSS, the scan's acceptance (draws 0–39
+  looked at while changing the run test at stop 58, 40 on not);
 * ``--cut``: causality — the files cut at several times T, the rows up to T against the whole
   run's (with and without a drag after T);
 * ``--stream``: :class:`selfnav.Navigator` fed one IMU sample a call against the batch call.
 
-    python experiments/drive_0708.py [DATA_FOLDER] [--grades] [--scan [--heldout] [-v]] [--stress [N]] [--cut] [--latency] [--stream]
+    python experiments/drive_0708.py [DATA_FOLDER] [--grades] [--scan [--heldout] [-v]] [--stress [N] [--from K]] [--cut] [--latency] [--stream]
 """
 from __future__ import annotations
 
@@ -177,13 +178,14 @@ def stress_one(i, folder=DEFAULT_FOLDER):
     return c, met, r, b
 
 
-def stress(n, folder=DEFAULT_FOLDER, workers=2):
-    """``n`` randomised windows (:func:`stress_case`) on two processes, one line each."""
+def stress(n, folder=DEFAULT_FOLDER, workers=2, first=0):
+    """``n`` randomised windows (:func:`stress_case` ``first … first + n − 1``) on two
+    processes, one line each."""
     from concurrent.futures import ProcessPoolExecutor
 
     met = 0
     with ProcessPoolExecutor(workers) as ex:
-        for c, ok, r, b in ex.map(stress_one, range(n), [folder] * n):
+        for c, ok, r, b in ex.map(stress_one, range(first, first + n), [folder] * n):
             met += ok
             print(f"{c['i']:3d} {c['kind']:5s} σ {c['sigma']:3.0f} m {c['duration']:3.0f} s from "
                   f"{c['start']:5.1f} s, velocity {c['velocity']:10s}: window max "
@@ -302,7 +304,9 @@ def main(argv):
         return
     if "--stress" in argv:
         k = argv.index("--stress")
-        stress(int(argv[k + 1]) if k + 1 < len(argv) and argv[k + 1].isdigit() else 40, folder)
+        n = int(argv[k + 1]) if k + 1 < len(argv) and argv[k + 1].isdigit() else 40
+        first = int(argv[argv.index("--from") + 1]) if "--from" in argv else 0
+        stress(n, folder, first=first)
         return
     if "--cut" in argv:
         print("clean, largest row difference before the cut (m):", causality(folder))
