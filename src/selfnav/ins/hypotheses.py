@@ -758,6 +758,41 @@ class FaultBank:
                 return ref.t0, q_fix / kappa
         return None
 
+    def velocity_moves_with_fault(self, r_v, S_v, span_s: float = 10.0) -> bool:
+        """While an episode refuses the positions: does a GNSS velocity move with them? Its
+        offset from ``M``'s, ``r_v`` (measured − ``M``; E, N; m/s) with covariance ``S_v``,
+        against the rate of the
+        episode's fixes' offsets from ``M`` over the last ``span_s`` (its track, not the run,
+        which starts again at every scattered verdict; a line through them, weighted by their σ,
+        its σ scaled by their scatter): a receiver whose velocity carries the positions' fault
+        (a spoofer fooling both) has an innovation equal to that rate — the offsets' rate is
+        the fault's minus ``M``'s velocity error, and so is the innovation; a clean Doppler's
+        is ``M``'s velocity error alone. True when the first explains it better than the
+        second (the likelier of the two: a velocity the gate passes is within ``ln(1/α)`` of
+        clean by construction): such a velocity says nothing the refused positions did not, and
+        fused it drags ``M`` along (drive_0708, a drag fooling both: the velocity gate, wider
+        with every second of dead reckoning, let it in within a minute)."""
+        seen = self.episode.track if self.episode is not None else self.run
+        run = [f for f in seen if f.t >= seen[-1].t - span_s] if seen else []
+        if len(run) < 4:
+            return False
+        t = np.array([f.t for f in run]) - run[-1].t
+        o = np.array([f.offset for f in run])
+        w = 1.0 / np.array([f.sigma for f in run]) ** 2
+        A = np.column_stack([np.ones_like(t), t])
+        N = (A * w[:, None]).T @ A
+        coef = np.linalg.solve(N, (A * w[:, None]).T @ o)
+        res = o - A @ coef
+        k = max(float(np.sum(w[:, None] * res ** 2)) / max(2 * (len(run) - 2), 1), 1.0)
+        rate_cov = np.eye(2) * np.linalg.inv(N)[1, 1] * k
+        r_v = np.asarray(r_v, float)[:2]
+        S = np.asarray(S_v, float)[:2, :2]
+        clean = float(r_v @ np.linalg.solve(S, r_v)) + math.log(np.linalg.det(S))
+        d = r_v - coef[1]
+        S2 = S + rate_cov
+        moving = float(d @ np.linalg.solve(S2, d)) + math.log(np.linalg.det(S2))
+        return moving < clean
+
     def _run_test(self, flt):
         """Are the fixes of the run healthy again? None while the run is too short; else the
         sequential likelihood-ratio test of :mod:`selfnav.ins.runtest`: ``white`` (no fault

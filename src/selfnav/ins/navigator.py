@@ -1330,7 +1330,12 @@ class Navigator:
             mv = VelocityFix(fx.t, fx.velocity_n, fx.sigma_vel, fx.sigma_vel_up).model(flt)
             nis_vel = flt.nis(mv)
             gate = self._gate_vel3 if len(mv.r) == 3 else self._gate_vel2
-            if nis_vel <= gate and (v.apply or self.bank.episode is not None):
+            if nis_vel <= gate and not v.apply and self.bank.episode is not None \
+                    and self.bank.velocity_moves_with_fault(-mv.r, mv.H @ flt.P @ mv.H.T + mv.R):
+                # the positions refused and the velocity moving with them: part of the fault
+                reason = (reason + "; " if reason else "") + \
+                    "velocity refused: it moves with the refused positions"
+            elif nis_vel <= gate and (v.apply or self.bank.episode is not None):
                 self._dx = self._dx + flt.update(mv)
         self._log(fx, status, reason, v.nis, nis_v, nis_vel)
 
