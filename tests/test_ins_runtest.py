@@ -110,3 +110,38 @@ def test_a_second_order_drift_of_rtk_fixes_is_a_fault_not_a_lost_ins(seed):
                       fix_sigma=Integrity().fault_min_m, fault_age=start * dt)
     assert _lost_margin(ev) < math.log(Integrity().p_false_alarm), _lost_margin(ev)
     assert ev["fault"] > ev["healthy"]
+
+
+def _track(rate, seed, n=40, dt=0.25, sigma=0.1):
+    """An episode's fixes (``t, offset, sigma``): offsets from M moving at ``rate`` m/s."""
+    from types import SimpleNamespace
+
+    rng = np.random.default_rng(seed)
+    t = np.arange(n) * dt
+    o = np.outer(t, rate) + rng.normal(0.0, sigma, (n, 2)) + 30.0
+    return [SimpleNamespace(t=a, offset=b, sigma=sigma) for a, b in zip(t, o)]
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_a_velocity_moving_with_the_refused_positions_is_part_of_the_fault(seed):
+    """While an episode refuses the fixes (their offsets from M moving at a spoofer's 1.2 m/s),
+    a GNSS velocity whose offset from M's is that rate moves with them and is refused; a clean
+    Doppler's (M's own velocity error, ~0) is not — it is what kept drive_0708 within 0.8 m
+    through windows of faulty positions; with the offsets standing still the two cannot be
+    told apart and the velocity is kept."""
+    from types import SimpleNamespace
+
+    from selfnav.ins.hypotheses import FaultBank
+
+    rng = np.random.default_rng(100 + seed)
+    S = np.eye(2) * 0.25 ** 2
+    rate = np.array([0.4, -1.1])
+    bank = SimpleNamespace(episode=SimpleNamespace(track=_track(rate, seed)), run=[])
+    spoofed = rate + rng.normal(0.0, 0.25, 2)
+    clean = rng.normal(0.0, 0.25, 2)
+    assert FaultBank.velocity_moves_with_fault(bank, spoofed, S)
+    assert not FaultBank.velocity_moves_with_fault(bank, clean, S)
+    still = SimpleNamespace(episode=SimpleNamespace(track=_track(np.zeros(2), seed)), run=[])
+    assert not FaultBank.velocity_moves_with_fault(still, np.array([0.02, -0.01]), S)
+    short = SimpleNamespace(episode=SimpleNamespace(track=_track(rate, seed)[:3]), run=[])
+    assert not FaultBank.velocity_moves_with_fault(short, spoofed, S)

@@ -761,15 +761,17 @@ class FaultBank:
     def velocity_moves_with_fault(self, r_v, S_v, span_s: float = 10.0) -> bool:
         """While an episode refuses the positions: does a GNSS velocity move with them? Its
         offset from ``M``'s, ``r_v`` (measured − ``M``; E, N; m/s) with covariance ``S_v``,
-        against the rate of the
-        episode's fixes' offsets from ``M`` over the last ``span_s`` (its track, not the run,
-        which starts again at every scattered verdict; a line through them, weighted by their σ,
-        its σ scaled by their scatter): a receiver whose velocity carries the positions' fault
+        against the rate of the episode's fixes' offsets from ``M`` over the last ``span_s``
+        (its track, not the run, which starts again at every scattered verdict; a line through
+        them, weighted by their σ, its σ scaled by their scatter): a receiver whose velocity carries the positions' fault
         (a spoofer fooling both) has an innovation equal to that rate — the offsets' rate is
         the fault's minus ``M``'s velocity error, and so is the innovation; a clean Doppler's
         is ``M``'s velocity error alone. True when the first explains it better than the
-        second (the likelier of the two: a velocity the gate passes is within ``ln(1/α)`` of
-        clean by construction): such a velocity says nothing the refused positions did not, and
+        second, at prior odds of e to 1 for a clean Doppler (most position faults — multipath,
+        a wrong fix — leave it clean; and a velocity the gate passes is within ``ln(1/α)`` of
+        clean by construction, so that test cannot be the gate's): with the offsets standing
+        still the two are alike and the velocity is kept. Such a velocity says nothing the
+        refused positions did not, and
         fused it drags ``M`` along (drive_0708, a drag fooling both: the velocity gate, wider
         with every second of dead reckoning, let it in within a minute)."""
         seen = self.episode.track if self.episode is not None else self.run
@@ -791,7 +793,7 @@ class FaultBank:
         d = r_v - coef[1]
         S2 = S + rate_cov
         moving = float(d @ np.linalg.solve(S2, d)) + math.log(np.linalg.det(S2))
-        return moving < clean
+        return 0.5 * (clean - moving) > 1.0
 
     def _run_test(self, flt):
         """Are the fixes of the run healthy again? None while the run is too short; else the
