@@ -132,6 +132,20 @@ class Verdict:
     vehicle: dict = field(default_factory=dict)
 
 
+def _rate(fixes, y, t_now: float, order: int):
+    """The rate now of ``y`` (E, N per fix) and its covariance: a polynomial of ``order`` in
+    time through it, weighted by the fixes' σ, its covariance scaled by their scatter
+    (``max(χ²/dof, 1)``)."""
+    t = np.array([f.t for f in fixes]) - t_now
+    A = np.column_stack([t ** j for j in range(order + 1)])
+    w = 1.0 / np.array([f.sigma for f in fixes]) ** 2
+    N = (A * w[:, None]).T @ A
+    coef = np.linalg.solve(N, (A * w[:, None]).T @ y)
+    res = y - A @ coef
+    k = max(float(np.sum(w[:, None] * res ** 2)) / max(2 * (len(fixes) - order - 1), 1), 1.0)
+    return coef[1], np.eye(2) * np.linalg.inv(N)[1, 1] * k
+
+
 class FaultBank:
     """References, episodes and the fix decisions (module docstring).
 
@@ -778,19 +792,11 @@ class FaultBank:
         run = [f for f in seen if f.t >= seen[-1].t - span_s] if seen else []
         if len(run) < 4:
             return False
-        t = np.array([f.t for f in run]) - run[-1].t
-        o = np.array([f.offset for f in run])
-        w = 1.0 / np.array([f.sigma for f in run]) ** 2
-        A = np.column_stack([np.ones_like(t), t])
-        N = (A * w[:, None]).T @ A
-        coef = np.linalg.solve(N, (A * w[:, None]).T @ o)
-        res = o - A @ coef
-        k = max(float(np.sum(w[:, None] * res ** 2)) / max(2 * (len(run) - 2), 1), 1.0)
-        rate_cov = np.eye(2) * np.linalg.inv(N)[1, 1] * k
+        rate, rate_cov = _rate(run, np.array([f.offset for f in run]), run[-1].t, order=1)
         r_v = np.asarray(r_v, float)[:2]
         S = np.asarray(S_v, float)[:2, :2]
         clean = float(r_v @ np.linalg.solve(S, r_v)) + math.log(np.linalg.det(S))
-        d = r_v - coef[1]
+        d = r_v - rate
         S2 = S + rate_cov
         moving = float(d @ np.linalg.solve(S2, d)) + math.log(np.linalg.det(S2))
         return 0.5 * (clean - moving) > 1.0
@@ -862,15 +868,7 @@ class FaultBank:
             # the fixes' own velocity at the run's end (a quadratic through their positions
             # over the last seconds): what the run measures of the velocity, whatever M's
             # drift did during it
-            tl = np.array([f.t for f in last]) - tt[-1]
-            Al = np.column_stack([np.ones_like(tl), tl, tl * tl])
-            wf = 1.0 / np.array([f.sigma for f in last]) ** 2
-            Nf = (Al * wf[:, None]).T @ Al
-            pl = np.array([f.p for f in last])
-            cf = np.linalg.solve(Nf, (Al * wf[:, None]).T @ pl)
-            res_f = pl - Al @ cf
-            k = max(float(np.sum(wf[:, None] * res_f**2)) / max(2 * (len(last) - 3), 1), 1.0)
-            out["velocity"] = (cf[1], np.eye(2) * np.linalg.inv(Nf)[1, 1] * k)
+            out["velocity"] = _rate(last, np.array([f.p for f in last]), tt[-1], order=2)
         return out
 
     def on_correction(self, dx, flt):
