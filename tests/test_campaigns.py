@@ -45,6 +45,49 @@ def test_distribution_summary_by_hand():
     assert s["worst_off_route"][0]["seed"] == 119 and s["worst_off_route"][0]["off_route_s"] == 25.0
 
 
+def test_fix_outcomes_by_hand():
+    """Issue 19's account of a drive, on a made-up one: 1 Hz fixes, a window 20–40 s; the
+    navigator started at 25 s (inside it), refused the clean fixes 45–49 s while 50 m off, was
+    60 m off from 55 to 60 s (the fixes clean since 40 s: locked out), 25 m off inside the
+    window."""
+    from types import SimpleNamespace
+
+    from selfnav.sensors import OutlierWindow
+
+    tg = np.arange(0.0, 61.0)
+    sim = SimpleNamespace(gnss=SimpleNamespace(t=tg, outlier=(tg >= 20) & (tg <= 40)))
+    t = np.arange(25.0, 60.05, 0.1)
+    err = np.full(len(t), 2.0)
+    err[(t >= 30) & (t < 35)] = 25.0
+    err[(t >= 44.5) & (t < 50)] = 50.0
+    err[(t >= 55) & (t < 60)] = 60.0
+    ev = SimpleNamespace(t=t, horizontal=err)
+    status = np.where(tg < 25, "aligning", "used").astype(object)
+    status[(tg >= 45) & (tg < 50)] = "rejected"
+    status[(tg >= 20) & (tg <= 40) & (tg >= 25)] = "rejected"     # the window's own: not counted
+    status[52] = "suspect"                                         # clean, 2 m off
+    sol = SimpleNamespace(detail=SimpleNamespace(fix_log={"t": tg, "status": list(status)}))
+    out = campaigns.fix_outcomes(sim, sol, ev, [OutlierWindow(20.0, 20.0, 200.0, "white")])
+    assert out["start_in_window"]
+    assert out["clean_refused_s"] == 6.0 and out["clean_refused_off_s"] == 5.0
+    # 55–60 s; 44.5–50 s is within 10 s of the window's end (the fixes not yet clean for long)
+    assert out["locked_s"] == pytest.approx(5.0, abs=0.11)
+    assert out["window_off_s"] == pytest.approx(5.0, abs=0.11)
+
+
+def test_failure_classes_by_hand():
+    tab = {"off_route_s": np.array([5.0, 30.0, 40.0, 50.0, 60.0]),
+           "start_in_window": np.array([1.0, 1.0, 0.0, 0.0, np.nan]),
+           "locked_s": np.array([0.0, 90.0, 45.0, 3.0, np.nan]),
+           "clean_refused_s": np.array([1.0, 2.0, 3.0, 4.0, np.nan]),
+           "clean_refused_off_s": np.array([0.0, 1.0, 1.0, 0.0, np.nan])}
+    c = campaigns.failure_classes(tab)
+    assert c["clean_refused_s"] == 10.0 and c["clean_refused_off_s"] == 2.0
+    # the drive without a start (NaN) is off the route its whole length
+    assert c["off_route_classes"] == {"no_start": 1, "started_in_window": 1, "locked_out": 1,
+                                      "in_windows": 1}
+
+
 @pytest.mark.slow
 def test_one_drive_through_the_pipeline():
     """150 s on Helsinki with one white window: the row has the metrics of evaluate --map and

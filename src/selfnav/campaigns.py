@@ -118,6 +118,62 @@ def longest_off_route(sim, lat, lon, t, limit_m=5.0):
     return worst * dt, float(1.0 - off.mean())
 
 
+#: a drive's solution is "off" where its horizontal error passes this (the issue-19 replays'
+#: "clean fix refused while the error is > 30 m")
+REFUSED_OFF_M = 30.0
+#: a lock-out: solution rows this far off (m) while the fixes have been clean for
+#: ``CLEAN_AFTER_S`` (s) — the fixes were there to put it right
+LOCKED_OFF_M, CLEAN_AFTER_S = 20.0, 10.0
+
+
+def fix_outcomes(sim, sol, ev, wins) -> dict:
+    """What the navigator did with the clean fixes of a drive (issue 19's account of its
+    failures), from the simulator's truth about each fix and the solution's fix log:
+
+    ``clean_refused_s``
+        seconds of clean fixes (no outlier window) refused or held as suspect, from the start
+        on;
+    ``clean_refused_off_s``
+        of those, the ones refused while the solution was more than ``REFUSED_OFF_M`` off —
+        the issue's "clean fix refused while the error is > 30 m";
+    ``locked_s``
+        seconds of solution rows more than ``LOCKED_OFF_M`` off while the fixes had been
+        clean for ``CLEAN_AFTER_S`` (a lock-out: the fixes could have put it right);
+    ``window_off_s``
+        seconds of rows more than ``LOCKED_OFF_M`` off inside an outlier window;
+    ``start_in_window``
+        the first row lies inside an outlier window (a start made on the fault)."""
+    g = sim.gnss
+    tg = np.asarray(g.t, float)
+    bad = np.asarray(g.outlier, bool)
+    dt_fix = float(np.median(np.diff(tg))) if len(tg) > 1 else 1.0
+    t_row = np.asarray(ev.t, float)
+    err = np.asarray(ev.horizontal, float)
+    dt_row = float(np.median(np.diff(t_row))) if len(t_row) > 1 else 1.0
+    log = getattr(sol.detail, "fix_log", None) if sol.detail is not None else None
+    refused = refused_off = 0
+    if log is not None and len(log.get("t", ())):
+        tl = np.asarray(log["t"], float)
+        st = np.array([str(getattr(x, "value", x)) for x in log["status"]])
+        k = np.clip(np.searchsorted(tg, tl), 0, len(tg) - 1)
+        clean = ~bad[k] & (np.abs(tg[k] - tl) < 0.5 * dt_fix)
+        no = clean & np.isin(st, ("rejected", "suspect")) & (tl >= t_row[0])
+        e_fix = np.interp(tl, t_row, err)
+        refused = int(np.count_nonzero(no))
+        refused_off = int(np.count_nonzero(no & (e_fix > REFUSED_OFF_M)))
+    inside = np.zeros(len(t_row), bool)
+    since_bad = np.full(len(t_row), np.inf)
+    for w in wins:
+        inside |= (t_row >= w.start) & (t_row <= w.end)
+        after = t_row > w.end
+        since_bad[after] = np.minimum(since_bad[after], t_row[after] - w.end)
+    clean_rows = ~inside & (since_bad >= CLEAN_AFTER_S)
+    return {"clean_refused_s": refused * dt_fix, "clean_refused_off_s": refused_off * dt_fix,
+            "locked_s": float(np.count_nonzero(clean_rows & (err > LOCKED_OFF_M))) * dt_row,
+            "window_off_s": float(np.count_nonzero(inside & (err > LOCKED_OFF_M))) * dt_row,
+            "start_in_window": bool(len(t_row) and inside[0])}
+
+
 def _navigator_options(params: dict) -> dict:
     """Navigator options of a campaign's parameters: ``yaw_bias_split_deg`` ≥ 0 sets the
     yaw-bias hypotheses' width (:mod:`selfnav.ins.headings`; 0: none), < 0 keeps the
@@ -186,6 +242,7 @@ def run_roadnav(seed: int, params: dict) -> dict:
         "sigma": (float(np.sqrt(np.mean(np.square(sig[k])))) if sig is not None and k.any()
                   else float("nan")),
         **_sigma_honesty(ev, sol),
+        **fix_outcomes(sim, sol, ev, wins),
         "grade": spec["imu"]["grade"], "map_aid": use_map,
         "odometer_sf": float(sim.odometer.meta["scale_factor"]) if sim.odometer is not None
         else float("nan"),
@@ -203,7 +260,9 @@ def run_roadnav(seed: int, params: dict) -> dict:
 ROW_KEYS = ("map", "sim_seed", "windows", "startup_window", "kinds", "along_rms_m",
             "cross_rms_m", "along_max_m", "cross_max_m", "along_heading_rms_m",
             "cross_heading_rms_m", "horizontal_rms_m", "horizontal_p95_m", "off_route_s",
-            "on_route", "start_s", "error", "sigma", "err_sigma_p95", "beyond_5sigma", "grade",
+            "on_route", "start_s", "error", "sigma", "err_sigma_p95", "beyond_5sigma",
+            "clean_refused_s", "clean_refused_off_s", "locked_s", "window_off_s",
+            "start_in_window", "grade",
             "map_aid", "odometer_sf", "odometer_sf_est", "nhc_slip_s", "sim_cpu_s", "nav_cpu_s",
             "cpu_s", "wall_s")
 
@@ -217,6 +276,29 @@ def _sigma_honesty(ev, sol) -> dict:
     s = np.interp(ev.t, sol.trajectory.t, np.asarray(sig, float))
     r = np.asarray(ev.horizontal, float) / np.maximum(s, 1e-9)
     return {"err_sigma_p95": float(np.percentile(r, 95)), "beyond_5sigma": float(np.mean(r > 5.0))}
+
+
+def failure_classes(table: dict, off_s: float = 20.0) -> dict:
+    """The clean fixes refused over all drives (s), and the drives more than ``off_s`` off the
+    route sorted by what went wrong first (:func:`fix_outcomes`): ``no_start`` (no solution at
+    all), ``started_in_window`` (the start was made on faulty fixes), ``locked_out`` (more than ``off_s`` of rows
+    ``LOCKED_OFF_M`` off with the fixes clean: it could have recovered and did not), else
+    ``in_windows`` (off only while the fixes were faulty: the dead reckoning, or a fault
+    followed)."""
+    def col(k):
+        return np.asarray(table[k], float)
+
+    off = col("off_route_s") > off_s
+    none = ~np.isfinite(col("start_in_window"))
+    start = np.nan_to_num(col("start_in_window")) > 0.5
+    locked = np.nan_to_num(col("locked_s")) > off_s
+    rest = off & ~none & ~start
+    return {"clean_refused_s": float(np.nansum(col("clean_refused_s"))),
+            "clean_refused_off_s": float(np.nansum(col("clean_refused_off_s"))),
+            "off_route_classes": {"no_start": int(np.sum(off & none)),
+                                  "started_in_window": int(np.sum(off & ~none & start)),
+                                  "locked_out": int(np.sum(rest & locked)),
+                                  "in_windows": int(np.sum(rest & ~locked))}}
 
 
 def summarize_roadnav(table: dict, worst: int = 5) -> dict:
@@ -240,6 +322,8 @@ def summarize_roadnav(table: dict, worst: int = 5) -> dict:
     out["runs_off_route_over_10_s"] = int(np.sum(off > 10.0))
     out["runs_off_route_over_20_s"] = int(np.sum(off > 20.0))
     out["cpu_s_per_run"] = float(np.mean(table["cpu_s"]))
+    if "clean_refused_s" in table:
+        out.update(failure_classes(table))
 
     def rows(order):
         return [{"seed": int(table["seed"][i]), "map": str(table["map"][i]),
