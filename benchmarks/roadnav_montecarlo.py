@@ -170,7 +170,9 @@ def main() -> None:
     print(table(s))
     print(f"\ndrives off the route for more than 10 s: {s['runs_off_route_over_10_s']}, more "
           f"than 20 s: {s['runs_off_route_over_20_s']}; RMS(error/σ) of the horizontal RMS "
-          f"against the filter's own σ: {s['rms_normalized_error']:.2f}")
+          f"against the filter's own σ: {s['rms_normalized_error']:.2f}"
+          + (f" ({s['n_without_result']} drive(s) without a start left out)"
+             if s.get("n_without_result") else ""))
     c = s["off_route_classes"]
     print(f"of those more than 20 s: {c['no_start']} never started, "
           f"{c['started_in_window']} started inside an outlier window, "

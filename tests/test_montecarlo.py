@@ -40,6 +40,17 @@ def test_summarize_by_hand():
     assert m["rms_bound"] == pytest.approx(np.sqrt(10 / 4))
     assert m["rms_error_over_bound"] == pytest.approx(m["rms_error"] / np.sqrt(2.5))
 
+    # a run without a result (a drive that never started: NaN) is left out and counted, not
+    # allowed to make every figure NaN (the road campaign of master seed 103 printed
+    # "RMS(error/σ) nan" for one such drive)
+    m2 = mc.summarize(np.r_[e, np.nan], np.r_[s, np.nan],
+                      bound=np.array([1.0, 1.0, 2.0, 2.0, 3.0]))
+    assert m2["n"] == 4 and m2["n_without_result"] == 1 and m["n_without_result"] == 0
+    for k in ("rms_error", "rms_normalized_error", "fraction_within_2sigma", "rms_bound"):
+        assert m2[k] == pytest.approx(m[k])
+    none = mc.summarize(np.array([np.nan]), np.array([1.0]))
+    assert none["n"] == 0 and none["n_without_result"] == 1 and np.isnan(none["rms_error"])
+
 
 def test_seeds_are_deterministic_and_distinct():
     a, b = mc.run_seeds(7, 500), mc.run_seeds(7, 500)

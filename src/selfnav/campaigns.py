@@ -281,10 +281,10 @@ def _sigma_honesty(ev, sol) -> dict:
 def failure_classes(table: dict, off_s: float = 20.0) -> dict:
     """The clean fixes refused over all drives (s), and the drives more than ``off_s`` off the
     route sorted by what went wrong first (:func:`fix_outcomes`): ``no_start`` (no solution at
-    all), ``started_in_window`` (the start was made on faulty fixes), ``locked_out`` (more than ``off_s`` of rows
-    ``LOCKED_OFF_M`` off with the fixes clean: it could have recovered and did not), else
-    ``in_windows`` (off only while the fixes were faulty: the dead reckoning, or a fault
-    followed)."""
+    all), ``started_in_window`` (the start was made on faulty fixes), ``locked_out`` (more than
+    ``off_s`` of rows ``LOCKED_OFF_M`` off with the fixes clean: it could have recovered and
+    did not), else ``in_windows`` (off only while the fixes were faulty: the dead reckoning, or
+    a fault followed)."""
     def col(k):
         return np.asarray(table[k], float)
 

@@ -228,11 +228,23 @@ class MonteCarloResult:
 def summarize(error, sigma, bound=None) -> dict:
     """Error statistics against the predicted sigma (and an analytic bound when given).
 
-    ``fraction_within_2sigma_se`` is the binomial standard error of that fraction.
+    ``fraction_within_2sigma_se`` is the binomial standard error of that fraction. Runs
+    without a result (a non-finite error or sigma: a drive that never started) are left out
+    and counted in ``n_without_result``; ``n`` is the runs summarised.
     """
     e = np.asarray(error, dtype=float)
     s = np.asarray(sigma, dtype=float)
+    ok = np.isfinite(e) & np.isfinite(s)
+    if bound is not None:
+        bound = np.asarray(bound, dtype=float)[ok]
+    dropped = int(e.size - np.count_nonzero(ok))
+    e, s = e[ok], s[ok]
     n = e.size
+    if n == 0:
+        nan = float("nan")
+        return {"n": 0, "rms_error": nan, "mean_error": nan, "std_error": nan, "rms_sigma": nan,
+                "rms_normalized_error": nan, "fraction_within_2sigma": nan,
+                "fraction_within_2sigma_se": nan, "n_without_result": dropped}
     z = e / s
     frac = float(np.mean(np.abs(z) <= 2.0))
     out = {
@@ -244,6 +256,7 @@ def summarize(error, sigma, bound=None) -> dict:
         "rms_normalized_error": float(np.sqrt(np.mean(z**2))),
         "fraction_within_2sigma": frac,
         "fraction_within_2sigma_se": float(np.sqrt(max(frac * (1 - frac), 1e-12) / n)),
+        "n_without_result": dropped,
     }
     if bound is not None:
         b = np.asarray(bound, dtype=float)
