@@ -159,7 +159,7 @@ def main() -> None:
                                  "runs_off_route_over_10_s",
                                  "runs_off_route_over_20_s", "worst_along",
                                  "worst_off_route", "clean_refused_s",
-                                 "clean_refused_off_s", "off_route_classes") if k in s},
+                                 "clean_refused_off_s", "off_route_classes")},
             "rms_normalized_error": s["rms_normalized_error"]}
     if a.json:
         print(json.dumps(info, indent=1))
