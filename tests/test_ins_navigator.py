@@ -503,6 +503,30 @@ def test_a_drag_while_the_covariance_reopens_is_caught_by_the_innovation_sums(ka
     assert e.max() < 40.0, e.max()
 
 
+@pytest.mark.slow
+def test_a_turn_while_dead_reckoning_is_placed_at_its_junction(karhula):
+    """A consumer car dead-reckons through a 118 s white window from 101 s (simulated issue-19
+    campaign drive 6560021803722912080 of master seed 2, Kotka Karhula); its INS has not yet
+    stood the fixes' test, so the map gives no road lines once its σ passes 10 m. By the 60°
+    turn at 140 s it is 35–40 m ahead along the road; the turn the gyros measured happened at
+    the one junction within its σ, and the corner fix says which: from 160 s to the window's
+    end the error stays within 4.7–10.1 m (largest per 10 s). Without the corner (before stop
+    60) it turned 40 m late: 16–21 m across the road for 50 s, 15–24 m, 52 s off the route."""
+    from selfnav import campaigns
+    from selfnav.sim.scenarios import simulate
+
+    spec, sim_seed, wins = campaigns.roadnav_scenario(6560021803722912080,
+                                                      dict(campaigns.ROADNAV_DEFAULTS))
+    assert spec["scenario"]["map"] == "kotka_karhula" and wins[0].kind == "white"
+    assert 100.0 < wins[0].start < 102.0 and wins[0].end > 215.0
+    sim = simulate(spec, seed=sim_seed)
+    sol = selfnav.navigate(sim.imu, sim.gnss.as_gnss(), karhula)
+    t, dp, *_ = errors(sol, sim.truth)
+    e = np.hypot(dp[:, 0], dp[:, 1])
+    after = (t > 160.0) & (t < 215.0)
+    assert e[after].max() < 12.5, e[after].max()
+
+
 def test_the_start_waits_for_fixes_on_the_roads_while_a_drag_from_power_on_lasts(helsinki):
     """A receiver dragged from power-on among the roads of central Helsinki (simulated issue-19
     campaign drive 6553702082059704831 of master seed 2, consumer IMU, a 109 s drag): its fixes
