@@ -648,12 +648,12 @@ class EkfRoadAid:
         # roads, the branch at a junction) it does not need. So it stands while dead-reckoning
         # up to ``max_sigma_m`` (campaign drive 6560021803722912080, a 118 s white window from
         # 101 s: the dead reckoning 40 m ahead at a 60° turn, 16–21 m across for 50 s without
-        # it, 4 m along after it)
+        # it, 4 m along after it); ``max_sigma_m`` bounds it below
         if self.dead_reckoning and sigma_h > self.dr_sigma_m and not self.ins_vouched \
-                and not (corner is not None and sigma_h <= self.max_sigma_m):
+                and corner is None:
             # the fixes are not taken (a fault episode, an outage) and no dead reckoning of this
             # INS has yet stood the fixes' test: the cloud follows the dead reckoning and cannot
-            # vouch for a road once the filter is unsure — its lines and corners turned a
+            # vouch for a road once the filter is unsure — its lines, legs and arcs turned a
             # filter onto the next road at a junction and made it sure of it (simulated drives:
             # 300 m off at σ 10 m; campaign drive 8017652828310085427, a 192 s white window
             # from 26 s: 148 m off without this). A vouched INS keeps the lines up to
