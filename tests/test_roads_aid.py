@@ -370,3 +370,66 @@ def test_a_start_is_not_refused_for_an_outlier_window_after_it():
     idx = np.flatnonzero(gd.t < 30.0)
     far = _off_roads(g, gd.t, np.column_stack([x, y]), idx, np.full(len(gd.t), 10.0))
     assert far.mean() <= 0.15
+
+
+def _l_roads():
+    """An L of two-way road, (0, 0) → (140, 0) → (200, 0) → (200, 200), and a road (0, 150)–
+    (100, 150) (local metres)."""
+    from selfnav.roads.graph import RoadGraph
+
+    xy = [(0, 0), (140, 0), (200, 0), (200, 200), (0, 150), (100, 150)]
+    pairs = [(0, 1), (1, 0), (1, 2), (2, 1), (2, 3), (3, 2), (4, 5), (5, 4)]
+    u, v = zip(*pairs)
+    return RoadGraph("L", np.radians(60.5), np.radians(27.0), np.arange(6), xy, u, v,
+                     [1, 1, 1, 1, 2, 2, 3, 3], ["residential"] * 8, [13.9] * 8)
+
+
+def test_the_map_doubts_a_filter_beside_its_roads_until_a_turn_fits_a_junction():
+    """Analytic (:class:`selfnav.roads.doubt.MapDoubt`): a filter heading East 40 m North of
+    the only East–West road within 110 m (the parallel road at y = 150 m): from the third look
+    a second apart the map holds a doubt of 40 m to the North, and the reported covariance is
+    widened along it to (40 m)² — and only along it. A correction of the filter moves the
+    doubt with it, a jump does not. A look 10 m from the road raises none. A turn whose legs
+    meet 40 m from any junction of it answers nothing; the L's corner within 15 m does. While a
+    start's heading is split, the hypothesis nearest a road running its way answers for all."""
+    from selfnav.roads.doubt import MapDoubt
+    from selfnav.roads.particles import successor_table
+
+    g = _l_roads()
+    off, succ = successor_table(g)
+    md = MapDoubt(g, off, succ)
+    east = np.pi / 2
+    for t in (1.0, 2.0):
+        md.look(t, np.array([100.0 + 10 * t, 40.0]), east)
+        assert md.e is None
+    md.look(3.0, np.array([130.0, 40.0]), east)
+    np.testing.assert_allclose(md.e, [0.0, 40.0])
+    np.testing.assert_allclose(md.widen(np.diag([25.0, 16.0])), np.diag([25.0, 1600.0]))
+    np.testing.assert_allclose(md.widen(np.diag([25.0, 2500.0])), np.diag([25.0, 2500.0]))
+    assert md.largest_m == pytest.approx(40.0) and md.first_s == 3.0
+    v = np.array([10.0, 0.0])
+    md.carry(3.0, [130.0, 40.0], v)
+    md.carry(4.0, [140.0, 43.0], v)                   # pulled 3 m North: the error with it
+    np.testing.assert_allclose(md.e, [0.0, 43.0])
+    md.carry(5.0, [150.0, 3.0], v)                    # a jump 40 m South: no evidence
+    np.testing.assert_allclose(md.e, [0.0, 43.0])
+    assert md.seconds == pytest.approx(2.0)
+    md.turn(6.0, np.array([150.0, 40.0]), east, 0.0)       # no junction of it there
+    assert md.e is not None
+    md.turn(7.0, np.array([203.0, 4.0]), east, 0.0)   # the L's corner: answered
+    assert md.e is None and md.spans == [[3.0, 7.0, 40.0]]
+
+    # a start's heading split East and North, 5 m West of the North–South road: the North
+    # hypothesis is on a road running its way, so no doubt; East alone is 60 m off
+    split, alone = MapDoubt(g, off, succ), MapDoubt(g, off, succ)
+    for t in (1.0, 2.0, 3.0):
+        split.look(t, [[195.0, 60.0], [195.0, 60.0]], [east, 0.0])
+        alone.look(t, [195.0, 60.0], east)
+    assert split.e is None
+    np.testing.assert_allclose(alone.e, [0.0, 60.0])
+
+    near = MapDoubt(g, off, succ)
+    for t in (1.0, 2.0, 3.0, 4.0):
+        near.look(t, np.array([50.0 + 10 * t, 10.0]), east)
+    assert near.e is None
+    np.testing.assert_allclose(near.widen(np.eye(2)), np.eye(2))

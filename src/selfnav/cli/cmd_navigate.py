@@ -335,6 +335,10 @@ def register(app: typer.Typer) -> None:
         if eps:
             kinds = ", ".join(f"{e['kind']} {e['start_s']:.1f}-{(e['end_s'] or 0):.1f} s" for e in eps[:3])
             print(f"  fault episodes: {len(eps)} ({kinds}{', ...' if len(eps) > 3 else ''})")
+        md = s.get("map_doubt")
+        if md and md["seconds"] > 0:
+            print(f"  the map's doubt: off the roads running its way from {md['first_s']:.1f} "
+                  f"s, up to {md['largest_m']:.0f} m; σ at least that for {md['seconds']:.0f} s")
         if "mounting_deg" in s:
             print(f"  IMU mounting to the vehicle: pitch {s['mounting_deg'][0]:.2f}°, "
                   f"yaw {s['mounting_deg'][1]:.2f}°")

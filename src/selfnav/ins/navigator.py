@@ -968,6 +968,9 @@ class Navigator:
             # for until a restart (a reference that ages out in a long window does not undo it)
             self._ins_vouched = self._ins_vouched or bool(self.bank.mature(te))
             self.road_aid.ins_vouched = self._ins_vouched
+            self.road_aid.hypotheses = None if self._hyp is None else [
+                (f.ins.lat, f.ins.lon, att.euler_from_dcm_nb(f.ins.C_nb)[2])
+                for f in self._hyp.filters]
             if self._hyp is None:
                 m = self.road_aid(te, flt)
                 if m is not None:
@@ -1558,6 +1561,8 @@ class Navigator:
         (:meth:`~selfnav.ins.hypotheses.FaultBank.doubt`)."""
         C_m = C_out[:2, :2]
         C_h = self.bank.doubt(C_m)
+        if self.road_aid is not None and hasattr(self.road_aid, "doubt"):
+            C_h = self.road_aid.doubt(C_h)
         if C_h is C_m:
             return C_out
         C_out = C_out.copy()
@@ -1736,6 +1741,15 @@ class Navigator:
                                     else [float(x) for x in mc.centre])}
         if self.cfg.vehicle.speed_hold:
             out["pace_priors"] = self.counts["pace_priors"]
+        md = getattr(self.road_aid, "map_doubt", None)
+        if md is not None:
+            # the map's doubt (selfnav.roads.doubt): seconds the reported σ was held to the
+            # solution's offset from the roads running its way, the largest, the first look
+            out["map_doubt"] = {"seconds": round(float(md.seconds), 1),
+                                "largest_m": round(float(md.largest_m), 1),
+                                "first_s": md.first_s,
+                                "spans": [[round(a, 1), None if b is None else round(b, 1),
+                                           round(d, 1)] for a, b, d in md.spans]}
         if flt is not None:
             out.update({
                 "imu_time_offset_s": flt.time_offset_applied + flt.time_offset,

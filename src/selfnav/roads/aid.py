@@ -18,6 +18,7 @@ from selfnav.ins.align import healthy_until, robust_init
 from selfnav.ins.config import CHI2_2_999, chi2_999
 from selfnav.ins.measurements import LevelRoad, RoadLine
 from selfnav.roads.corners import corner_candidates, line_intersection
+from selfnav.roads.doubt import MapDoubt
 from selfnav.roads.evidence import SIGMA_ROAD_M, on_roads_llr, thin_track
 from selfnav.roads.graph import RoadGraph
 from selfnav.roads.particles import TWO_PI, MatcherConfig, RoadParticles, wrap
@@ -269,6 +270,10 @@ class EkfRoadAid:
         turn within the filter's σ
     q_along : (m/s)²/s, along-track speed variance added while the cloud judges GNSS
         unhealthy (:meth:`_widen_along`; None: off)
+    doubt_radius_m, doubt_min_m : the map's doubt (:meth:`doubt`,
+        :class:`~selfnav.roads.doubt.MapDoubt`'s ``radius_m`` and ``min_m``): the nearest road
+        running the filter's way is looked for up to this far, m, and a doubt held when it lies
+        this far or farther, m; ``doubt_radius_m`` 0 switches it off
     curve_sigma : σ of the cross-track constraint while turning through a gentle curve (no
         vertex above 20° near), m (None: none, the default: at 2 m it was worse on the 40
         tuning drives, pooled along/cross 60.6 / 48.6 m against 56.3 / 44.5 m, 12 drives more
@@ -282,7 +287,8 @@ class EkfRoadAid:
                  agree_m=10.0, arc_agree_m=4.0, bend_zone=25.0, grade_sigma=0.08, seed=0,
                  lock_m=5.0,
                  sigma_corner=2.5, q_along=0.01, curve_sigma=None, max_sigma_m=30.0,
-                 dr_sigma_m=10.0, line_agree=np.radians(8.0), evidence_min_m=20.0):
+                 dr_sigma_m=10.0, line_agree=np.radians(8.0), evidence_min_m=20.0,
+                 doubt_radius_m=200.0, doubt_min_m=15.0):
         self.g = graph
         self.pf = RoadParticles(graph, cfg, seed)
         self.fix_t, self.fix_xy, self.sig = [], [], []     # the fixes as they arrive
@@ -327,6 +333,14 @@ class EkfRoadAid:
         self.ins_vouched = True
         self.lock = None           # (t, normal) of the last constraint that found the filter on it
         self.evidence_min_m = evidence_min_m
+        #: the map's doubt (:class:`selfnav.roads.doubt.MapDoubt`; None: off)
+        self.map_doubt = (MapDoubt(graph, self.pf.off, self.pf.succ, radius_m=doubt_radius_m,
+                                   min_m=doubt_min_m) if doubt_radius_m else None)
+        #: set by the navigator while a start's heading hypotheses are open: (lat, lon rad,
+        #: heading rad) of each — the filter's heading may be any of them, and the map's doubt
+        #: looks from all (:meth:`~selfnav.roads.doubt.MapDoubt.look`); None when it is one
+        self.hypotheses = None
+        self._t_look = -np.inf
 
     # ------------------------------------------------------------------ the stream
     def add_fix(self, t, lat, lon, sigma):
@@ -614,6 +628,8 @@ class EkfRoadAid:
             pf.reset_health(healthy_history=True)
         v = ins.velocity_n
         dt = t - self.t_last
+        if self.map_doubt is not None:
+            self.map_doubt.carry(t, p_ins, v)
         speed = float(np.hypot(v[0], v[1]))
         self.t_last = t
         rate = self._yaw_rate(flt, hdg, dt)
@@ -626,6 +642,15 @@ class EkfRoadAid:
         elif not turning:
             self.radii = []
         corner = self._corner_fix(t, flt, p_ins, hdg, turning, speed)
+        if self.map_doubt is not None and not turning and self.turn is None and speed > 2.0 \
+                and t - self._t_look >= 1.0 - 1e-9:
+            self._t_look = t                     # once a second on a straight run
+            if self.hypotheses is None:
+                self.map_doubt.look(t, p_ins, hdg)
+            else:
+                h = np.asarray(self.hypotheses, float)
+                self.map_doubt.look(t, np.column_stack(self.g.to_local(h[:, 0], h[:, 1])),
+                                    h[:, 2])
         self._widen_along(flt, hdg, dt)
         pf.predict(speed * dt, hdg, dt)
         while self.k < len(self.fix_t) and self.fix_t[self.k] <= t:
@@ -774,6 +799,17 @@ class EkfRoadAid:
         u = np.array([np.sin(hdg), np.cos(hdg)])
         flt.P[3:5, 3:5] += np.outer(u, u) * (self.q_along * dt)
 
+    def doubt(self, C_h) -> np.ndarray:
+        """The horizontal output covariance ``C_h`` (2×2, ENU) with the map's doubt
+        (:class:`~selfnav.roads.doubt.MapDoubt`): while the filter has been seen off the roads
+        running its way (the offset ``e``, carried with its corrections since), its variance
+        along ``e`` is at least ``|e|²`` — the map says the error is that large or larger. A
+        receiver dragged from power-on (simulated issue-19 campaign drive 1629028103303956202,
+        master seed 2: followed 40–140 m off at σ 4–6 m) gives the fixes' own tests nothing to
+        see; the map does. Only the reported covariance: the filter's own is not opened, the
+        map having named no place to go."""
+        return C_h if self.map_doubt is None else self.map_doubt.widen(C_h)
+
     # ------------------------------------------------------------------ corners
     def _corner_fix(self, t, flt, p_ins, hdg, turning, speed):
         """A position fix from the map at the end of a turn (:mod:`selfnav.roads.corners`).
@@ -816,12 +852,14 @@ class EkfRoadAid:
         V = x[0]
         P2 = flt.P[0:2, 0:2]
         radius = min(80.0, max(30.0, 3.0 * float(np.sqrt(np.linalg.eigvalsh(P2)[-1])) + 10.0))
+        if self.map_doubt is not None:
+            self.map_doubt.turn(t, V, h0, hdg)           # a junction within its reach answers it
+        S = P2 + np.eye(2) * self.sigma_corner**2
         cand = corner_candidates(self.g, self.pf.off, self.pf.succ, V, h0, hdg, radius)
         if len(cand) == 0:
             return None
         # each candidate against the filter's own uncertainty: the nearest must fit (χ² 2
         # dof, 0.999) and the next must fit clearly worse (a grid of equal corners)
-        S = P2 + np.eye(2) * self.sigma_corner**2
         E = V - cand
         q = np.einsum("ij,ij->i", E, np.linalg.solve(S, E.T).T)
         i = int(np.argmin(q))
