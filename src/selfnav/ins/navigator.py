@@ -639,7 +639,10 @@ class Navigator:
         self.flt = flt
         self.adapter = NoiseAdapter(cfg.adaptation, cfg.integrity.p_false_alarm) if cfg.imu.adapt else None
         # the vibration at rest, or the white noise the model assumes, is the reference
-        dt_imu = float(np.median(np.diff(st.imu().t))) if st.imu_t else 0.01
+        t_buf = st.imu().t if st.imu_t else np.zeros(0)
+        # (a start on one buffered sample has no step: the median of none was NaN, and so the
+        # reference, with a numpy warning — tests/test_odometer.py's streamed start)
+        dt_imu = float(np.median(np.diff(t_buf))) if len(t_buf) > 1 else 0.01
         ms = start.measured
         if ms is not None and ms.vibration is not None:
             self.vib_reference = ms.vibration
