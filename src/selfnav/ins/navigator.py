@@ -971,9 +971,7 @@ class Navigator:
             # for until a restart (a reference that ages out in a long window does not undo it)
             self._ins_vouched = self._ins_vouched or bool(self.bank.mature(te))
             self.road_aid.ins_vouched = self._ins_vouched
-            self.road_aid.hypotheses = None if self._hyp is None else [
-                (f.ins.lat, f.ins.lon, att.euler_from_dcm_nb(f.ins.C_nb)[2])
-                for f in self._hyp.filters]
+            self.road_aid.hypotheses = None if self._hyp is None else self._hyp.filters
             if self._hyp is None:
                 m = self.road_aid(te, flt)
                 if m is not None:

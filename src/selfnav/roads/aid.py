@@ -336,9 +336,9 @@ class EkfRoadAid:
         #: the map's doubt (:class:`selfnav.roads.doubt.MapDoubt`; None: off)
         self.map_doubt = (MapDoubt(graph, self.pf.off, self.pf.succ, radius_m=doubt_radius_m,
                                    min_m=doubt_min_m) if doubt_radius_m else None)
-        #: set by the navigator while a start's heading hypotheses are open: (lat, lon rad,
-        #: heading rad) of each — the filter's heading may be any of them, and the map's doubt
-        #: looks from all (:meth:`~selfnav.roads.doubt.MapDoubt.look`); None when it is one
+        #: set by the navigator while a start's heading hypotheses are open: their filters —
+        #: the filter's heading may be any of them, and the map's doubt looks from all
+        #: (:meth:`~selfnav.roads.doubt.MapDoubt.look`); None when it is one
         self.hypotheses = None
         self._t_look = -np.inf
 
@@ -648,9 +648,9 @@ class EkfRoadAid:
             if self.hypotheses is None:
                 self.map_doubt.look(t, p_ins, hdg)
             else:
-                h = np.asarray(self.hypotheses, float)
-                self.map_doubt.look(t, np.column_stack(self.g.to_local(h[:, 0], h[:, 1])),
-                                    h[:, 2])
+                hyp = [f.ins for f in self.hypotheses]
+                xy = self.g.to_local(np.array([i.lat for i in hyp]), np.array([i.lon for i in hyp]))
+                self.map_doubt.look(t, np.column_stack(xy), [_heading_of(i.C_nb) for i in hyp])
         self._widen_along(flt, hdg, dt)
         pf.predict(speed * dt, hdg, dt)
         while self.k < len(self.fix_t) and self.fix_t[self.k] <= t:

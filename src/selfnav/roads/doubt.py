@@ -18,7 +18,7 @@ solution back towards the road moves its error with it); a jump — a restart, a
 reference — is no evidence either way, and the doubt stands until a turn fits.
 
 Measured on the simulated map campaigns (docs/navigator.md, "Stop 61"): drives whose σ keeps
-the issue-18 promise (p95 of error/σ_h ≤ 3, ≤ 1 % beyond 5σ) 73 → 79 of 100 on master seed 2
+the issue-18 promise (p95 of error/σ_h ≤ 3, ≤ 1 % beyond 5σ) 73 → 77 of 100 on master seed 2
 and on seed 103, the solutions unchanged.
 """
 from __future__ import annotations
@@ -52,8 +52,9 @@ class MapDoubt:
     Attributes
     ----------
     e : (2,) or None — the filter's offset (ENU m) from the road, carried since
-    seconds, largest_m, first_s : seconds a doubt was held, the largest look, its first time
+    seconds : seconds a doubt was held
     spans : ``[start_s, end_s or None, largest_m]`` of each time a doubt was held
+    first_s, largest_m : when the first was raised (None: never) and the largest look, m
     """
 
     def __init__(self, graph: RoadGraph, off, succ, *, radius_m=200.0, min_m=15.0,
@@ -62,7 +63,7 @@ class MapDoubt:
         self.radius_m, self.min_m, self.heading_tol = radius_m, min_m, heading_tol
         self.n_looks, self.window_s, self.jump_m = looks, window_s, jump_m
         self.e = None
-        self.seconds, self.largest_m, self.first_s = 0.0, 0.0, None
+        self.seconds = 0.0
         self.spans = []
         self._looks = []            # (t, distance, offset)
         self._last = None           # (t, position, velocity) at the previous epoch
@@ -112,17 +113,22 @@ class MapDoubt:
             return
         self.e = np.asarray(e, float)
         self.spans[-1][2] = max(self.spans[-1][2], float(d))
-        if self.first_s is None:
-            self.first_s = float(t)
-        self.largest_m = max(self.largest_m, float(d))
+
+    @property
+    def first_s(self):
+        return self.spans[0][0] if self.spans else None
+
+    @property
+    def largest_m(self) -> float:
+        return max((sp[2] for sp in self.spans), default=0.0)
 
     def turn(self, t, vertex, h_in, h_out):
-        """A finished turn (at ``t``) from heading ``h_in`` to ``h_out`` whose legs meet at ``vertex``: a
-        junction (or bend) of that turn within ``min_m`` answers the doubt. A turn that fits
-        none raises none: a road curving through many short segments has no such junction
-        (simulated campaign drive 4811001308232054616 of master seed 2, Kotka: a clean 88°
-        turn whose nearest junction of it lay 118 m away), and a filter beside its road shows
-        it on the straight that follows."""
+        """A finished turn (at ``t``) from heading ``h_in`` to ``h_out`` whose legs meet at
+        ``vertex``: a junction (or bend) of that turn within ``min_m`` answers the doubt. A
+        turn that fits none raises none: a road curving through many short segments has no
+        such junction (simulated campaign drive 4811001308232054616 of master seed 2, Kotka: a
+        clean 88° turn whose nearest junction of it lay 118 m away), and a filter beside its
+        road shows it on the straight that follows."""
         if self.e is None:
             return
         if len(corner_candidates(self.g, self.off, self.succ, vertex, h_in, h_out,
