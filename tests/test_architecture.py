@@ -19,7 +19,7 @@ PENDING = set()
 LAYERS = {
     "types": 0, "units": 0, "errors": 0,
     "earth": 1, "attitude": 1, "datum": 1, "kernels": 1, "igrf": 1, "cluster": 1, "axes": 1,
-    "correlation": 1,
+    "correlation": 1, "quantiles": 1,
     "axes_detect": 1,
     "io": 2, "sensors": 2,
     "allan": 3, "latitude": 3, "moving": 3, "moving_budget": 3, "ins": 3, "roads": 3, "gnss": 3,

@@ -25,7 +25,6 @@ import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.signal import lfilter
 
 from selfnav import attitude as att
 from selfnav.earth import radii
@@ -106,7 +105,7 @@ class SensorTriad:
             a = np.exp(-dt / self.bias_tau)
             w = rng.normal(size=(n, 3)) * sig * np.sqrt(1.0 - a * a)
             zi = (a * sig * rng.normal(size=3))[None, :]  # stationary start
-            gm = lfilter([1.0], [1.0, -a], w, axis=0, zi=zi)[0]
+            gm = _ar1(a, w, zi)
             y = y + gm
             c["gauss_markov"] = gm
         rw = _vec3(self.random_walk)
@@ -404,6 +403,15 @@ def drift_errors(n, dt, sigma, tau, rng, *, start="zero"):
     return e
 
 
+def _ar1(a, w, zi):
+    """``y_k = a·y_{k−1} + w_k`` along axis 0, ``zi`` the filter state before the first sample
+    (``scipy.signal.lfilter``; imported here, not with the module: ``scipy.signal`` takes ~2 s
+    to import and only the simulators draw noise with it)."""
+    from scipy.signal import lfilter
+
+    return lfilter([1.0], [1.0, -a], w, axis=0, zi=zi)[0]
+
+
 def outlier_errors(kind, n, dt, sigma, tau, rng):
     """``n`` horizontal outlier errors (E, N metres) at interval ``dt`` of an
     :class:`OutlierWindow` kind: white, gm (first-order Gauss–Markov from its steady state),
@@ -412,7 +420,7 @@ def outlier_errors(kind, n, dt, sigma, tau, rng):
     if kind == "gm":
         a = np.exp(-dt / tau)
         z = rng.normal(size=(n, 2)) * sigma * np.sqrt(1 - a * a)
-        return lfilter([1.0], [1.0, -a], z, axis=0, zi=(a * sigma * rng.normal(size=2))[None])[0]
+        return _ar1(a, z, (a * sigma * rng.normal(size=2))[None])
     if kind == "white":
         return rng.normal(size=(n, 2)) * sigma
     if kind in ("drift", "drift-jump"):

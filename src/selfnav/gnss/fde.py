@@ -53,7 +53,8 @@ from itertools import combinations
 from math import comb
 
 import numpy as np
-from scipy.stats import chi2
+
+from selfnav.quantiles import chi2_ppf
 
 MEDIAN_CHI2_1 = 0.454936423119572
 #: the quantile of the squared normalized residuals the variance factor is read from, and
@@ -87,7 +88,7 @@ class EpochFde:
 
 def _threshold(dof, alpha):
     dof = np.asarray(dof)
-    return np.where(dof > 0, chi2.ppf(1.0 - alpha, np.maximum(dof, 1)), np.inf)
+    return np.where(dof > 0, chi2_ppf(1.0 - alpha, np.maximum(dof, 1)), np.inf)
 
 
 def subset_solve(H, r, w, masks, hold=None):
@@ -143,7 +144,7 @@ def fde_epoch(H, r, var, *, alpha: float = 1e-3, max_exclusions: int | None = No
     if not ok[0] and kmax > 0:
         found = None
         cand_mask, cand_ratio = full[0], T[0] / thr[0]
-        pen = chi2.ppf(1.0 - alpha, 1)          # what one more exclusion must buy
+        pen = chi2_ppf(1.0 - alpha, 1)          # what one more exclusion must buy
         best_score = np.inf
         k = 0
         for k in range(1, kmax + 1):

@@ -39,11 +39,11 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.stats import chi2
 
 from selfnav.earth import OMEGA_EARTH, WGS84, ecef_to_geodetic, enu_rotation
 from selfnav.errors import SelfnavError
 from selfnav.gnss.fde import VarianceScale, fde_epoch
+from selfnav.quantiles import chi2_ppf
 from selfnav.types import GnssData
 
 C_LIGHT = 299_792_458.0
@@ -321,7 +321,7 @@ def solve_spp(t, pr, var, sat_ecef, system, elevation=None, cn0=None,
     rounds = 0
     if cfg.raim and cfg.fde != "none":
         while rounds < cfg.max_exclusions:
-            thr = np.where(dof > 0, chi2.ppf(1.0 - cfg.alpha, np.maximum(dof, 1)), np.inf)
+            thr = np.where(dof > 0, chi2_ppf(1.0 - cfg.alpha, np.maximum(dof, 1)), np.inf)
             fail = np.flatnonzero((T > thr) & (dof >= 2))
             if fail.size == 0:
                 break
@@ -343,7 +343,7 @@ def solve_spp(t, pr, var, sat_ecef, system, elevation=None, cn0=None,
             Tf, dff = statistic(rf, wf, use[fail], fail)
             T[fail], dof[fail] = Tf, dff
             rounds += 1
-    thr = np.where(dof > 0, chi2.ppf(1.0 - cfg.alpha, np.maximum(dof, 1)), np.inf)
+    thr = np.where(dof > 0, chi2_ppf(1.0 - cfg.alpha, np.maximum(dof, 1)), np.inf)
     passed = T <= thr
     n_used = use.sum(1)
     solvable = dof >= 0
@@ -433,7 +433,7 @@ def _solve_subset(t_ep, order, epoch_sorted, slot, mask, use, prp, vp, satp, sys
         T[solv] = np.sum(w * rs * rs, axis=1)
         cu = np.any((sysp[solv][..., None] == np.arange(K)) & use[solv][..., None], 1).sum(1)
         dof[solv] = use[solv].sum(1) - 3 - cu
-    thr = np.where(dof > 0, chi2.ppf(1.0 - cfg.alpha, np.maximum(dof, 1)), np.inf)
+    thr = np.where(dof > 0, chi2_ppf(1.0 - cfg.alpha, np.maximum(dof, 1)), np.inf)
     passed = T <= thr
     # a failed test means the σ model is too optimistic there: inflate by the variance factor
     infl = np.where(~passed & (dof > 0), T / np.maximum(dof, 1), 1.0)

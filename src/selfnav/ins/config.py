@@ -25,10 +25,11 @@ import functools
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.stats import chi2
+
 
 from selfnav import sensors
 from selfnav.errors import SelfnavError
+from selfnav.quantiles import chi2_ppf
 from selfnav.units import DEG
 
 CHI2_2_999 = 13.816
@@ -37,7 +38,7 @@ CHI2_2_999 = 13.816
 @functools.lru_cache(maxsize=128)
 def chi2_999(dof: int) -> float:
     """0.999 quantile of χ²(dof) (cached)."""
-    return float(chi2.ppf(0.999, dof))
+    return float(chi2_ppf(0.999, dof))
 
 
 @dataclass

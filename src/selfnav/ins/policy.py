@@ -13,7 +13,7 @@ import enum
 import functools
 from dataclasses import dataclass
 
-from scipy.stats import chi2, norm
+from selfnav.quantiles import chi2_isf, norm_isf
 
 
 class FixStatus(str, enum.Enum):
@@ -87,13 +87,13 @@ class FixDecision:
 def chi2_gate(dof: int, p_false_alarm: float) -> float:
     """The χ²(dof) quantile a consistent measurement exceeds with probability
     ``p_false_alarm``."""
-    return float(chi2.isf(p_false_alarm, dof))
+    return float(chi2_isf(p_false_alarm, dof))
 
 
 @functools.lru_cache(maxsize=64)
 def normal_quantile(p: float) -> float:
     """The two-sided normal factor: ``P(|x| > k σ) = p``."""
-    return float(norm.isf(0.5 * p))
+    return float(norm_isf(0.5 * p))
 
 
 __all__ = ["FixStatus", "NavStatus", "FixDecision", "chi2_gate", "normal_quantile"]

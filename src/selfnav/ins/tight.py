@@ -47,7 +47,6 @@ import warnings
 from dataclasses import dataclass, field, replace
 
 import numpy as np
-from scipy.stats import chi2
 
 from selfnav.errors import SelfnavError
 from selfnav.gnss.fde import VarianceScale
@@ -59,6 +58,7 @@ from selfnav.ins.align import align_in_motion, coarse_align
 from selfnav.ins.config import PLATFORMS, FilterConfig
 from selfnav.ins.ekf import IR, IV, InsGnssFilter
 from selfnav.ins.measurements import LevelRoad, NonHolonomic, Pseudoranges, RangeRates
+from selfnav.quantiles import chi2_ppf
 from selfnav.types import ImuData
 
 DEG = np.pi / 180.0
@@ -154,10 +154,10 @@ class TightIns:
         self.flt = flt
         self.cfg = cfg
         self.scale = VarianceScale()
-        self._gate = float(chi2.ppf(1.0 - cfg.alpha, 1))
+        self._gate = float(chi2_ppf(1.0 - cfg.alpha, 1))
         self._t_last = flt.ins.t
         self._t_grade = -np.inf
-        self._gate2 = float(chi2.ppf(1.0 - cfg.alpha, 2))
+        self._gate2 = float(chi2_ppf(1.0 - cfg.alpha, 2))
         self.nhc_refused = 0
         # a receiver's code can be decimetres good (the PSINS record's): the floors are low
         self.mixture = MixtureModel(sigma_los_min=0.1, sigma_los45_min=0.05) if cfg.mixture \
@@ -220,7 +220,7 @@ class TightIns:
             dx, C, T, dof = _snapshot(m, cols)
         except np.linalg.LinAlgError:
             return False
-        if dof < 1 or T > chi2.ppf(1.0 - self.cfg.alpha, dof):
+        if dof < 1 or T > chi2_ppf(1.0 - self.cfg.alpha, dof):
             return False
         d = dx[:3]
         add = np.outer(d, d) + C[:3, :3]

@@ -17,6 +17,7 @@ from selfnav.errors import SelfnavError
 from selfnav.ins.align import healthy_until, robust_init
 from selfnav.ins.config import CHI2_2_999, chi2_999
 from selfnav.ins.measurements import LevelRoad, RoadLine
+from selfnav.quantiles import binom_isf
 from selfnav.roads.corners import corner_candidates, line_intersection
 from selfnav.roads.doubt import MapDoubt
 from selfnav.roads.evidence import SIGMA_ROAD_M, on_roads_llr, thin_track
@@ -43,9 +44,7 @@ def far_allowed(n: int, p_far: float = P_FAR_NOMINAL, alpha: float = ALPHA_START
     """How many of ``n`` clean fixes may lie far from the roads before the start's check
     refuses them: the binomial ``(n, p_far)`` count exceeded with probability ≤ ``alpha``
     (n = 12: 2, n = 20: 3, n = 40: 5)."""
-    from scipy.stats import binom
-
-    return int(binom.isf(alpha, n, p_far))
+    return binom_isf(alpha, n, p_far)
 
 
 def start_on_roads(imu, gnss, graph: RoadGraph, cfg=None, *, span=30.0, far_sigmas=2.0,
