@@ -196,6 +196,26 @@ def test_candidates_agree_with_brute_force(helsinki):
     assert np.all(np.bincount(c1.query, minlength=300) >= 1)
 
 
+def test_nearest_distance_is_the_nearest_segment_inside_and_outside_the_map(helsinki):
+    # shapely as the oracle; and the candidate search's own value to the last bit (the map's
+    # evidence on a track compares the two: selfnav.roads.evidence)
+    from selfnav.roads.grid import grid_candidates, nearest_distance
+
+    g = helsinki
+    rng = np.random.default_rng(2)
+    lo, hi = g.xy.min(axis=0), g.xy.max(axis=0)
+    pts = np.concatenate([rng.uniform(lo, hi, (400, 2)),
+                          rng.uniform(lo - 600.0, hi + 600.0, (200, 2))])
+    d = nearest_distance(g.grid, pts)
+    lines = shapely.linestrings(np.stack([g.xy[g.seg_u], g.xy[g.seg_v]], axis=1))
+    truth = shapely.distance(shapely.points(pts)[:, None], lines[None, :]).min(axis=1)
+    np.testing.assert_allclose(d, truth, atol=1e-9)
+    key = np.arange(len(g.grid.a), dtype=np.int64)
+    q, _, _, _, dc, _ = grid_candidates(g.grid, pts, 2000.0, 1, key, len(key))
+    np.testing.assert_array_equal(d[q], dc)
+    assert len(q) == len(pts)
+
+
 def test_road_heading(karhula):
     g = karhula
     i = int(np.argmax(g.seg_len))

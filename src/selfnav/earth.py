@@ -211,11 +211,16 @@ def enu_to_geodetic(enu, lat0, lon0, h0=0.0, ellipsoid: Ellipsoid = WGS84):
                             ellipsoid)
 
 
+_SCALAR = (float, int, np.floating)
+
+
 def enu_offset(lat0, lon0, h0, lat, lon, h, ellipsoid: Ellipsoid = WGS84):
     """ENU metres of (lat, lon, h) from (lat0, lon0, h0), small-offset form (curvature radii
     at the origin; exact to ~1e-7 relative over a few km). Arrays broadcast to (..., 3); all
     scalars give a (3,) array by a fast path (the filter calls this at every epoch)."""
-    if all(isinstance(x, (float, int, np.floating)) for x in (lat0, lon0, h0, lat, lon, h)):
+    S = _SCALAR
+    if isinstance(lat0, S) and isinstance(lon0, S) and isinstance(h0, S) \
+            and isinstance(lat, S) and isinstance(lon, S) and isinstance(h, S):
         s2 = math.sin(lat0) ** 2
         w = math.sqrt(1.0 - ellipsoid.e2 * s2)
         rn = ellipsoid.a / w + h0
