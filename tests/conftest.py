@@ -4,6 +4,19 @@ from pathlib import Path
 import pytest
 
 REPO = Path(__file__).resolve().parents[1]
+
+
+def pytest_configure(config):
+    # with two workers (``-n 2``), tests are sent one at a time, so that the long ones, sent
+    # first (below), are spread over both and the workers end together: sent in batches of
+    # consecutive tests, CI's two runs idled one worker for 90-110 s at their ends
+    if getattr(config.option, "maxschedchunk", "no xdist") is None:
+        config.option.maxschedchunk = 1
+
+
+def pytest_collection_modifyitems(config, items):
+    """The tests marked ``long`` first, each group in its collection order."""
+    items.sort(key=lambda item: item.get_closest_marker("long") is None)
 SHARED_DATA = REPO.parent / "shared" / "data"
 
 

@@ -171,6 +171,7 @@ def test_up_axis_confidence_falls_near_45_degrees():
     assert D.detect_up_axis(np.tile([0.5, 0.0, 0.2], (100, 1))).confidence == 0.0   # not gravity
 
 
+@pytest.mark.long
 def test_navigate_reports_the_axes_it_finds(drive, tmp_path, capsys):
     """Through the command line: the drive written in FRD (its gnss.csv holds positions only,
     σ 1 m at 5 Hz), ``--imu-axes detect``: the JSON's ``imu_axes`` has up = the sensor's −z by

@@ -112,6 +112,7 @@ def test_one_drive_through_the_pipeline():
 
 
 @pytest.mark.slow
+@pytest.mark.long
 def test_a_vouched_dead_reckoning_keeps_its_road_lines_through_an_outlier_window():
     """Campaign drive 8632296919476031792 (master seed 2; SIMULATED consumer car on Karhula, a
     147 s white window and a 127 s Gauss–Markov one): after the corner at 407 s the dead

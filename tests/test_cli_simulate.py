@@ -87,6 +87,7 @@ def test_implausible_scenarios_are_one_line(tmp_path, capsys):
 
 
 @pytest.mark.slow
+@pytest.mark.long
 def test_real_ctrl_c_old_set_or_new_set(tmp_path):
     """SIGINT to the process group at several moments of a run into an existing folder."""
     env = dict(os.environ, PYTHONPATH=str(SRC))

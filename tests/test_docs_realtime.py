@@ -5,6 +5,7 @@ import re
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 import selfnav
 from selfnav.earth import radii
@@ -24,6 +25,7 @@ def _run_page(capsys):
     return ns["rows"], ns["sim"], capsys.readouterr().out
 
 
+@pytest.mark.long
 def test_the_realtime_loop_runs_as_written(capsys):
     rows, sim, out = _run_page(capsys)
     assert "gnss" in out and "rows," in out

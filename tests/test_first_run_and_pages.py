@@ -87,9 +87,20 @@ def test_evaluate_report_renders_with_its_figures(tmp_path, capsys):
 
 
 @pytest.mark.slow
-@pytest.mark.skipif(CHROMIUM is None, reason="headless Chromium is not installed (Debian "
-                    "package chromium: apt-get install -y chromium)")
-def test_demo_page_renders_its_three_figures(tmp_path, capsys):
+@pytest.mark.long
+def test_demo_runs_on_shipped_data_and_its_page_renders_its_three_figures(tmp_path, capsys,
+                                                                           monkeypatch):
+    """README's first command: the terminal summary, the JSON, the page and its figures, from
+    one run of the demo (45-80 s; two runs were the slowest two tests of CI)."""
+    import selfnav.demo
+
+    real, kept = selfnav.demo.run_demo, {}
+
+    def run_demo(out, progress=None):
+        kept["summary"] = real(out, progress=progress)
+        return kept["summary"]
+
+    monkeypatch.setattr(selfnav.demo, "run_demo", run_demo)
     code, out, err = run(["demo", "--out", tmp_path / "demo"], capsys)
     assert code == 0, err
     html = (tmp_path / "demo" / "index.html").read_text()
@@ -99,5 +110,17 @@ def test_demo_page_renders_its_three_figures(tmp_path, capsys):
     for row in html.split("<tr>")[2:5]:
         sigma = row.split("<td>")[3].split("</td>")[0]
         assert f"± {sigma}° (1σ)" in out, (sigma, out)
+    on_disk = json.loads((tmp_path / "demo" / "latitude.json").read_text())
+    assert abs(on_disk["error_deg"]) < 0.1
+    # --json prints the same run's summary as one JSON object (the run itself is the one above)
+    monkeypatch.setattr(selfnav.demo, "run_demo", lambda out, progress=None: kept["summary"])
+    code, out, err = run(["demo", "--out", tmp_path / "demo2", "--json"], capsys)
+    assert code == 0, err
+    d = json.loads(out)
+    assert d["error_deg"] == on_disk["error_deg"] and abs(d["error_deg"]) < 0.1
+    assert set(d["navigation_simulated"]) == set(kept["summary"]["navigation_simulated"])
+    if CHROMIUM is None:
+        pytest.skip("the page's screenshot: headless Chromium is not installed (Debian package "
+                    "chromium: apt-get install -y chromium)")
     img = screenshot(tmp_path / "demo" / "index.html", tmp_path / "demo.png", (1000, 3600))
     assert _figure_rows(img) > 900

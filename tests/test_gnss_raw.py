@@ -25,6 +25,7 @@ def run(cfg, duration=400.0, rcfg=None):
     return r, truth, enu
 
 
+@pytest.mark.long
 def test_open_sky_accuracy_and_honest_sigma():
     """Error / σ on simulated data: mean horizontal NEES ≈ 2 (2 dof), over two seeds."""
     for seed in (1, 3):
@@ -60,6 +61,7 @@ def test_ramps_on_two_satellites_are_excluded(doppler):
 
 
 @pytest.mark.slow
+@pytest.mark.long
 def test_street_canyon_with_reflections():
     """Partial sky with reflected (NLOS) satellites, four seeds: metre-level positions; the
     exclusion costs nothing there (and gains little: see docs/gnss.md, the reflections are

@@ -154,6 +154,7 @@ def _score(r, truth):
     ("smartloc_berlin_potsdamer_platz", 7.5, 6.5),
     # measured 5.47 / 2.10 m (libRSF 4.92 / 2.42; the issue's targets 4.5 / 2.3)
     ("smartloc_berlin_potsdamer_platz_rtklib", 5.8, 2.3)])
+@pytest.mark.long
 def test_berlin_potsdamer_platz_tightly_coupled(berlin, name, causal_max, smooth_max):
     (prs, odo), truth = berlin[name]
     causal = run_tight(prs, odo)
@@ -202,6 +203,7 @@ def _drifted(prs, t0, az_deg, r_ecef, rate=0.5, duration=120.0):
 
 
 @pytest.mark.parametrize("seed", [0, 2, 4])
+@pytest.mark.long
 def test_a_drift_every_satellite_shares_is_caught_by_the_odometry(seed):
     """SIMULATED: a geometry-consistent drift (0.5 m/s for 120 s, then held) passes every
     per-satellite test and the filter follows it (~60 m); the drift branches of
@@ -301,6 +303,7 @@ def test_navigate_gnss_raw_bad_combinations_are_one_line(shared_data, tmp_path, 
 
 
 @pytest.mark.slow
+@pytest.mark.long
 def test_simulated_city_drives_beat_single_point_fixes():
     """SIMULATED city drives (selfnav.sim.urban: streets with buildings along the car,
     reflections, correlated multipath, odometry with scale and bias errors), not used while
@@ -363,6 +366,7 @@ def test_simulate_city_then_navigate_gnss_raw_end_to_end(tmp_path, capsys):
 
 
 @pytest.mark.slow
+@pytest.mark.long
 def test_a_ramp_on_two_strong_satellites_is_excluded_within_10_s_in_city_drives():
     """SIMULATED city drives (σ0 1 m): the two strongest satellites at 120 s ramp at 1 m/s
     for 60 s (issue 23). Neither is used as line of sight after 10 s in any drive; the median

@@ -152,6 +152,7 @@ def test_platform_names_of_the_cli_are_the_configs():
     ("pedestrian", "rest", "pedestrian"),
     ("pedestrian", "moving", None),
     ("rover", "moving", None)])
+@pytest.mark.long
 def test_slow_platforms_start_through_the_cli(kind, start, platform, tmp_path, capsys):
     """Before issue 20 all exited 2 ("no run ... faster than 5.0 m/s"). With ``--platform``
     a walker standing still starts at rest within 30 s of the first fix; with the defaults a
@@ -189,6 +190,7 @@ def test_slow_platforms_start_through_the_cli(kind, start, platform, tmp_path, c
 
 
 @pytest.mark.parametrize("options", [{"platform": "pedestrian"}, {"nhc": False}])
+@pytest.mark.long
 def test_a_simulated_rtk_walk_follows_its_fixes_and_bridges_10_s_outages(options):
     """The issue's handheld walk (consumer MEMS, RTK), simulated: 5 Hz fixes of 2 cm, a walker
     standing 30 s then walking with tight turns. With ``--platform pedestrian`` or
@@ -219,6 +221,7 @@ def test_a_simulated_rtk_walk_follows_its_fixes_and_bridges_10_s_outages(options
 
 @pytest.mark.parametrize("kind,start,options", [("pedestrian", "rest", {"platform": "pedestrian"}),
                                                 ("rover", "moving", {})])
+@pytest.mark.long
 def test_the_start_anywhere_is_causal(kind, start, options):
     """Files cut at T give the same rows before T (measured 0.0 m, also for a drone)."""
     import warnings
@@ -534,6 +537,7 @@ def test_clean_fixes_are_not_refused_for_minutes_on_a_ship_with_the_defaults():
     assert ev["horizontal_rms_m"] < 15.0, ev["horizontal_rms_m"]
 
 
+@pytest.mark.long
 def test_the_boat_profile_holds_the_heading_of_a_hull_and_a_ship():
     """``--platform boat`` keeps the sideways constraint at σ 1 m/s with a mounting-yaw state:
     a hull yaws about its course in the waves (the simulated ship ±5° at 6 m/s, 0.5 m/s
@@ -558,6 +562,7 @@ def test_the_boat_profile_holds_the_heading_of_a_hull_and_a_ship():
 
 
 @pytest.mark.slow
+@pytest.mark.long
 def test_a_walker_keeps_its_pace_through_10_s_outages():
     """Simulated walker (tuning seed 31, start at rest, 1.8 m GNSS with a drifting part,
     ``--platform pedestrian``), 10 s outages every 30 s from a minute after the start: a
@@ -590,6 +595,7 @@ def test_a_walker_keeps_its_pace_through_10_s_outages():
     assert np.sum(ends[True] < 6.0) >= 4
 
 
+@pytest.mark.long
 def test_the_slow_platform_fallback_keeps_what_the_user_set(tmp_path, capsys):
     """``auto`` falls back to the slow platform's settings when the start shows no car, but
     not over the settings given by name: ``--no-magnetometer-aid`` (and ``speed_hold=False``

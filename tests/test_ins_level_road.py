@@ -3,6 +3,7 @@ consumer gyro bias drives after a start in motion, made visible through the vert
 import math
 
 import numpy as np
+import pytest
 
 import selfnav
 from selfnav import attitude as att
@@ -59,6 +60,7 @@ def test_a_car_has_the_prior_and_a_slow_platform_does_not():
     assert SLOW_PLATFORM["grade_sigma"] is None
 
 
+@pytest.mark.long
 def test_short_consumer_drives_started_in_motion_keep_their_sigma():
     """Three of the short consumer drives (benchmarks/short_consumer_drives.py; simulated, not
     tuned on): docs/realtime.md's (seed 1: a 2.5 °/s x-gyro bias, 12° of pitch in 6 s after

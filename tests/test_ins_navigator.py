@@ -60,6 +60,7 @@ def _error_over_sigma(sol, truth):
     return e, e / sol.columns["sigma_h_m"][ok]
 
 
+@pytest.mark.long
 def test_sample_by_sample_equals_batch(graph):
     """One IMU sample a call, each fix handed over when the IMU's stamps reach its time (as
     docs/realtime.md does; the batch call hands them over in the same order), gives the rows
@@ -94,6 +95,7 @@ def test_chunking_does_not_change_the_rows(graph):
     assert len(a.t) == len(b.t) and _rows_equal(a, b) < 1e-3
 
 
+@pytest.mark.long
 def test_the_past_does_not_change_with_later_data(graph):
     """Cut the records at T: the rows up to T equal those of the whole run, with clean data
     and with a drag after T (DESIGN §10: only --smooth looks ahead)."""
@@ -199,6 +201,7 @@ def test_output_rate_is_a_regular_grid(graph):
         assert np.allclose(sol.t * rate, np.round(sol.t * rate))
 
 
+@pytest.mark.long
 def test_smoother_beats_the_filter_through_an_outage(graph):
     """Four drives (one drive is one draw of the outage's luck: seed 2 alone gave 0.73 at
     0.2.0 and 0.84 since issue 18): pooled over the 40 s outages, the smoother's error is
@@ -458,6 +461,7 @@ def test_a_start_made_on_a_drag_is_given_up_when_the_map_refutes_it(karhula):
     assert e[(t > drift[0].start) & (t < drift[0].end)].max() < 30.0     # the drift refused
 
 
+@pytest.mark.long
 def test_a_drag_soon_after_the_start_is_refused_when_the_map_witnesses_a_dead_reckoning(karhula):
     """A 2 m/s drag from 57 s, 20 s after a consumer start (simulated issue-19 campaign drive
     7821150004149555261 of master seed 2, Kotka Karhula): while the heading hypotheses resolve
@@ -552,6 +556,7 @@ def test_a_drag_followed_from_power_on_is_doubted_by_the_map(helsinki):
     assert sol.stats["map_doubt"]["first_s"] < 60.0
 
 
+@pytest.mark.long
 def test_the_start_waits_for_fixes_on_the_roads_while_a_drag_from_power_on_lasts(helsinki):
     """A receiver dragged from power-on among the roads of central Helsinki (simulated issue-19
     campaign drive 6553702082059704831 of master seed 2, consumer IMU, a 109 s drag): its fixes
@@ -575,6 +580,7 @@ def test_the_start_waits_for_fixes_on_the_roads_while_a_drag_from_power_on_lasts
     assert before.any() and e[before].max() < 20.0, e[before].max()
 
 
+@pytest.mark.long
 def test_the_start_gives_the_map_up_where_it_has_no_roads(karhula):
     """Fixes far from every road of the map given (the Karhula map without its roads within
     400 m of the drive: an extract with a hole where the car is): the map does not cover the
@@ -699,6 +705,7 @@ def test_a_young_consumer_start_measures_its_yaw_bias_at_the_first_stop():
     assert np.percentile(r, 95) <= 3.0 and np.mean(r > 5.0) <= 0.01
 
 
+@pytest.mark.long
 def test_the_map_checks_the_start_a_city_car_makes_without_a_straight_run():
     """Simulated campaign drive 1617935041801320419 (master seed 3, industrial IMU, central
     Helsinki with the map): 243 s of 200 m white outliers, 77 s of clean fixes, then a 232 s

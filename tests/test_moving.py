@@ -513,6 +513,7 @@ def test_fixed_offset_and_timing_sensitivity(sim_ships, capsys):
 
 @pytest.mark.slow
 @pytest.mark.parametrize("hemi", ["N", "S"])
+@pytest.mark.long
 def test_acceptance_30min_ship_cli(tmp_path, capsys, hemi):
     """Issue 13 acceptance: 30-min ships, simulator output (interval means), perfect IMU, 100 Hz
     attitude late/early by up to 50 ms, default options."""

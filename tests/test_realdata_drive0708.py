@@ -82,6 +82,7 @@ def test_every_preset_reaches_the_same_accuracy(drive, grade):
 
 
 @pytest.mark.parametrize("shift", [-0.3, -0.25, 0.25])
+@pytest.mark.long
 def test_time_offset_is_found(drive, shift):
     """IMU stamps shifted: the reported total offset moves by the shift (±0.03 s)."""
     _, imu, truth = drive
@@ -92,6 +93,7 @@ def test_time_offset_is_found(drive, shift):
     assert np.sqrt(np.mean(e**2)) <= 0.3
 
 
+@pytest.mark.long
 def test_outages_every_two_minutes(drive):
     """30 s without fixes every 120 s: ≤ 10 m just before each outage ends; the smoother
     closes them to a metre."""
@@ -146,6 +148,7 @@ def test_time_offset_sigma_covers_what_removing_data_moves(drive):
         assert abs(tau_k - tau) < 3.0 * max(sigma, sigma_k), (start, tau_k, tau, sigma)
 
 
+@pytest.mark.long
 def test_one_sample_a_call_equals_the_batch_call(drive):
     """The real drive through ``selfnav.Navigator`` one IMU sample a call, each fix handed over
     when the IMU's stamps reach its time (docs/realtime.md), gives the rows of

@@ -78,6 +78,7 @@ def _fleet_acceptance(g, name, n_tracks, tmp_path, capsys, seed, duration=(300.0
 
 @pytest.mark.slow
 @pytest.mark.parametrize("name", ["kotka_karhula", "helsinki_centre"])
+@pytest.mark.long
 def test_fleet_of_200_tracks_in_one_call(request, name, tmp_path, capsys):
     """The acceptance fleet: 200 trips of 5-20 min, 5-30 s irregular sampling, σ 3-10 m, ISO
     time stamps, repeated stamps, rows out of order, stationary starts, in one file; one call.
