@@ -244,7 +244,7 @@ def offset_to_geodetic(lat0, lon0, h0, enu, ellipsoid: Ellipsoid = WGS84):
         w = math.sqrt(1.0 - ellipsoid.e2 * math.sin(lat0) ** 2)
         rn = ellipsoid.a / w + h0
         rm = ellipsoid.a * (1.0 - ellipsoid.e2) / (w * w * w) + h0
-        e, n, u = (float(x) for x in enu)
+        e, n, u = float(enu[0]), float(enu[1]), float(enu[2])
         return lat0 + n / rm, lon0 + e / (rn * math.cos(lat0)), h0 + u
     rm, rn = radii(lat0, h0, ellipsoid)
     enu = np.asarray(enu, dtype=float)

@@ -748,7 +748,9 @@ class InsGnssFilter:
         if lay.lever is not None:
             c = np.asarray(self.cfg.gnss.lever_arm_b, dtype=float).reshape(3)
             b = k * st.lever_arm_sigma
-            np.clip(self.lever_b, c - b, c + b, out=self.lever_b)
+            # np.clip's own arithmetic without its wrapper (called at every correction)
+            np.minimum(np.maximum(self.lever_b, c - b, out=self.lever_b), c + b,
+                       out=self.lever_b)
 
     def kalman(self, r, H, R):
         """Apply a measurement (residual ``h(x̃) − z``, Jacobian ``H``, noise ``R``) and correct
