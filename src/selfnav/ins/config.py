@@ -26,7 +26,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-
 from selfnav import sensors
 from selfnav.errors import SelfnavError
 from selfnav.quantiles import chi2_ppf
