@@ -48,8 +48,13 @@ def local_cluster(workers: int):
         _start_forkserver_ignoring_sigint()
         with dask.config.set({f"distributed.nanny.pre-spawn-environ.{key}": None,
                               "distributed.worker.multiprocessing-method": "forkserver"}):
+            # no dashboard, and the scheduler's HTTP routes (health, metrics) on a free port:
+            # on the default 8787 a second cluster on the machine (two campaigns, two test
+            # workers) printed distributed's "Port 8787 is already in use"
             return LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                                dashboard_address=None, silence_logs=logging.CRITICAL)
+                                dashboard_address=None,
+                                scheduler_kwargs={"dashboard_address": ":0"},
+                                silence_logs=logging.CRITICAL)
     finally:
         if saved is not None:
             os.environ[key] = saved
