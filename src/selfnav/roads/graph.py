@@ -459,7 +459,7 @@ class RoadGraph:
             if len(few):
                 # the nearest road whatever the distance, and whatever lies within 30 m more
                 r_few = np.broadcast_to(np.asarray(radius, float), (n,))[few]
-                d1 = nearest_distance(self.grid, xy[few], 2 * float(r_few.max()))
+                d1 = nearest_distance(self.grid, xy[few])
                 q, *rest = grid_candidates(self.grid, xy[few], np.maximum(r_few, d1 + 30.0), k,
                                            key, n_keys)
                 is_few = np.zeros(n, bool)

@@ -337,7 +337,7 @@ class HmmMatcher:
         sizes = [len(np.atleast_2d(x)) for x in tracks_xy]
         xy = np.concatenate([np.atleast_2d(np.asarray(x, float)).reshape(-1, 2)
                              for x in tracks_xy])
-        d = nearest_distance(self.graph.grid, xy, 16.0)     # rings from 16 m
+        d = nearest_distance(self.graph.grid, xy)
         out = []
         for a, b in zip(np.cumsum([0] + sizes[:-1]), np.cumsum(sizes)):
             s = 1.4826 * float(np.median(d[a:b])) if b > a else self.sigma
