@@ -433,3 +433,47 @@ def test_the_map_doubts_a_filter_beside_its_roads_until_a_turn_fits_a_junction()
         near.look(t, np.array([50.0 + 10 * t, 10.0]), east)
     assert near.e is None
     np.testing.assert_allclose(near.widen(np.eye(2)), np.eye(2))
+
+
+def test_a_dead_reckoning_is_placed_at_the_junction_of_its_turn():
+    """Analytic (:meth:`EkfRoadAid.dead_reckoning_corner`, the fault bank's map-aided dead
+    reckonings): on the L of roads, a dead reckoning 20 m ahead of the car along the East leg
+    turns North at the corner (200, 0); stepped once a second, its turn ends 2 s later with
+    its vertex at (220, 0). The one map corner of that turn within its σ (10 m) is 20 m West:
+    the fix takes it (σ 2.5 m) to within 2 m of (200, ·) and its East σ below 3 m. A turn
+    whose vertex has no junction of it within its reach (the same drive 120 m from the L's
+    corner, at σ 10 m) is no fix."""
+    from selfnav import attitude as att
+    from selfnav.ins.ekf import InsGnssFilter
+    from selfnav.ins.hypotheses import Reference
+
+    g = _l_roads()
+
+    def drive(ahead_m):
+        cfg = ins.navigator_config("consumer", lever_arm_m=np.zeros(3))
+        east, north = np.pi / 2, 0.0
+        flt = InsGnssFilter(cfg, 0.0, g.lat0, g.lon0, 0.0, np.zeros(3), np.eye(3))
+        flt.P[0:2, 0:2] = np.eye(2) * 100.0
+        ref, aid, fixes = Reference(0.0, flt), EkfRoadAid(g), []
+        for k in range(15):
+            t = float(k)
+            if k < 10:     # the true car at (100 + 10 t, 0) heading East, then North at x = 200
+                p, hdg, v = (100.0 + 10.0 * t + ahead_m, 0.0), east, (10.0, 0.0, 0.0)
+            else:
+                p, hdg, v = (200.0 + ahead_m, 10.0 * (t - 10.0) + ahead_m), north, (0.0, 10.0, 0.0)
+            lat, lon = g.to_geodetic(*p)
+            flt.ins.set_state(lat=float(lat), lon=float(lon), velocity_n=np.array(v),
+                              C_nb=att.dcm_nb_from_euler(0.0, 0.0, hdg))
+            flt.ins.t = t
+            if aid.dead_reckoning_corner(ref):
+                fixes.append(t)
+                break               # the dead reckoning now carries the fix
+        return flt, ref, fixes
+
+    flt, ref, fixes = drive(20.0)
+    assert fixes == [12.0] and ref.t_aided == 12.0
+    x, _ = g.to_local(flt.ins.lat, flt.ins.lon)
+    assert abs(float(x) - 200.0) < 2.0
+    assert np.sqrt(flt.P[0, 0]) < 3.0
+    _, ref, fixes = drive(120.0)
+    assert fixes == [] and ref.t_aided is None

@@ -15,10 +15,11 @@ import numpy as np
 from selfnav.earth import offset_to_geodetic
 from selfnav.errors import SelfnavError
 from selfnav.ins.align import healthy_until, robust_init
-from selfnav.ins.config import CHI2_2_999, chi2_999
+from selfnav.ins.config import chi2_999
 from selfnav.ins.measurements import LevelRoad, RoadLine
 from selfnav.quantiles import binom_isf
-from selfnav.roads.corners import corner_candidates, line_intersection
+from selfnav.roads.corners import (MAX_CORNER_TURN, TURN_RATE, TurnWatch, corner_offset,
+                                   line_intersection)
 from selfnav.roads.doubt import MapDoubt
 from selfnav.roads.evidence import SIGMA_ROAD_M, on_roads_llr, thin_track
 from selfnav.roads.graph import RoadGraph
@@ -34,10 +35,6 @@ P_FAR_NOMINAL = 0.06
 #: costs a start 30 s later): 5 of 40 allowed — at 1 %, 6 and 7 of 40, two drifts from
 #: power-on were started on (tests/test_roads_aid.py); the old fixed 15 % share allowed 6
 ALPHA_START_CHECK = 0.05
-#: rad: the sharpest turn the map places a car by (a corner fix, an arc): beyond it the
-#: legs are near antiparallel — a U-turn on one road, a hairpin — and the lines through
-#: them meet, and a circle tangent to both lies, hundreds of metres away
-MAX_CORNER_TURN = math.radians(150.0)
 
 
 def far_allowed(n: int, p_far: float = P_FAR_NOMINAL, alpha: float = ALPHA_START_CHECK) -> int:
@@ -315,8 +312,7 @@ class EkfRoadAid:
         self.curve_sigma = curve_sigma
         self.sigma_corner = sigma_corner
         self.q_along = q_along
-        self.track = []            # (t, heading, position) of the filter, recent seconds
-        self.turn = None           # the turn being driven: {"t0", "t_calm"}
+        self.watch = TurnWatch()   # the filter's turns (the corner fixes)
         self.corner_log = []       # (t, correction E, N) of each corner fix
         self.lock_m = lock_m
         self.max_sigma_m = max_sigma_m
@@ -635,13 +631,13 @@ class EkfRoadAid:
         self.hdg_last = hdg
         self.rates = [r for r in self.rates if r[0] > t - 0.6 - 1e-9] + [(t, rate)]
         w_rate = float(np.mean([r[1] for r in self.rates]))          # over the last 0.6 s
-        turning = abs(w_rate) > np.radians(3.0)
+        turning = abs(w_rate) > TURN_RATE
         if turning and speed > 1.0 and abs(rate) > np.radians(1.0):
             self.radii.append((hdg, speed / abs(rate)))
         elif not turning:
             self.radii = []
         corner = self._corner_fix(t, flt, p_ins, hdg, turning, speed)
-        if self.map_doubt is not None and not turning and self.turn is None and speed > 2.0 \
+        if self.map_doubt is not None and not turning and self.watch.turn is None and speed > 2.0 \
                 and t - self._t_look >= 1.0 - 1e-9:
             self._t_look = t                     # once a second on a straight run
             if self.hypotheses is None:
@@ -810,6 +806,43 @@ class EkfRoadAid:
         return C_h if self.map_doubt is None else self.map_doubt.widen(C_h)
 
     # ------------------------------------------------------------------ corners
+    def dead_reckoning_corner(self, ref) -> bool:
+        """A corner fix for one of the fault bank's dead reckonings (``ref``: its
+        :class:`~selfnav.ins.hypotheses.Reference`, whose ``watch`` follows its turns; called
+        after each of its steps, looked at 0.5 s apart at most): the map places the turn it has just driven as :meth:`_corner_fix` places
+        the navigator's filter's — a dead reckoning the map aids stays the hypothesis "the
+        fixes are faulty since it branched" (the map is neither side), its σ road-sized where
+        the roads turn instead of a consumer IMU's free growth. True when a fix was applied."""
+        flt = ref.flt
+        if ref.watch is None:
+            ref.watch = TurnWatch()
+        watch, ins = ref.watch, flt.ins
+        t = float(ins.t)
+        if watch.last is not None and t - watch.last[0] < 0.5 - 1e-9:
+            return False
+        x, y = self.g.to_local(ins.lat, ins.lon)
+        p = np.array([float(x), float(y)])
+        hdg = _heading_of(ins.C_nb)
+        speed = float(np.hypot(*ins.velocity_n[:2]))
+        turn = watch.step(t, hdg, p, abs(watch.rate(t, hdg)) > TURN_RATE, speed)
+        if turn is None:
+            return False
+        P2 = flt.P[0:2, 0:2]
+        if float(np.sqrt(max(np.linalg.eigvalsh(P2)[-1], 0.0))) > self.max_sigma_m:
+            return False
+        e = corner_offset(self.g, self.pf.off, self.pf.succ, turn[0], turn[1], hdg, P2,
+                          self.sigma_corner)
+        if e is None:
+            return False
+        u = np.array([np.sin(hdg), np.cos(hdg)])
+        n = np.array([u[1], -u[0]])
+        self.apply([{"normal_n": n, "offset": float(e @ n), "sigma": self.sigma_corner,
+                     "along_n": u, "along_offset": float(e @ u),
+                     "sigma_along": self.sigma_corner, "gate": False}], flt)
+        self.counts["dr_corner"] = self.counts.get("dr_corner", 0) + 1
+        ref.t_aided = t
+        return True
+
     def _corner_fix(self, t, flt, p_ins, hdg, turning, speed):
         """A position fix from the map at the end of a turn (:mod:`selfnav.roads.corners`).
 
@@ -822,50 +855,15 @@ class EkfRoadAid:
         corners) gives the correction, applied along and across the new road with σ
         ``sigma_corner``.
         """
-        self.track = [x for x in self.track if x[0] > t - 25.0] + [(t, hdg, p_ins.copy())]
-        if turning:
-            if self.turn is None:
-                self.turn = {"t0": t, "t_calm": None}
-            self.turn["t_calm"] = None
-            if t - self.turn["t0"] > 20.0:
-                self.turn = None
+        turn = self.watch.step(t, hdg, p_ins, turning, speed)
+        if turn is None:
             return None
-        if self.turn is None:
-            return None
-        if self.turn["t_calm"] is None:
-            self.turn["t_calm"] = t
-        if t - self.turn["t_calm"] < 1.0 - 1e-9:
-            return None
-        t0 = self.turn["t0"]
-        self.turn = None
-        before = [x for x in self.track if x[0] <= t0 - 1.0]
-        if not before or speed < 2.0:
-            return None
-        _, h0, p0 = before[-1]
-        th = float(wrap(hdg - h0))
-        if not np.radians(35.0) <= abs(th) <= MAX_CORNER_TURN:
-            return None
-        x = line_intersection(p0, h0, p_ins, hdg)
-        if x is None or x[1] < -10.0 or x[2] > 10.0:
-            return None
-        V = x[0]
+        V, h0 = turn
         P2 = flt.P[0:2, 0:2]
-        radius = min(80.0, max(30.0, 3.0 * float(np.sqrt(np.linalg.eigvalsh(P2)[-1])) + 10.0))
         if self.map_doubt is not None:
             self.map_doubt.turn(t, V, h0, hdg)           # a junction within its reach answers it
-        S = P2 + np.eye(2) * self.sigma_corner**2
-        cand = corner_candidates(self.g, self.pf.off, self.pf.succ, V, h0, hdg, radius)
-        if len(cand) == 0:
-            return None
-        # each candidate against the filter's own uncertainty: the nearest must fit (χ² 2
-        # dof, 0.999) and the next must fit clearly worse (a grid of equal corners)
-        E = V - cand
-        q = np.einsum("ij,ij->i", E, np.linalg.solve(S, E.T).T)
-        i = int(np.argmin(q))
-        if q[i] > CHI2_2_999 or (len(cand) > 1 and np.partition(q, 1)[1] < q[i] + 9.0):
-            return None
-        e = E[i]
-        if np.hypot(*e) < 2.0:
+        e = corner_offset(self.g, self.pf.off, self.pf.succ, V, h0, hdg, P2, self.sigma_corner)
+        if e is None:
             return None
         u = np.array([np.sin(hdg), np.cos(hdg)])
         n = np.array([u[1], -u[0]])
