@@ -468,12 +468,13 @@ def test_a_dead_reckoning_is_placed_at_the_junction_of_its_turn():
             if aid.dead_reckoning_corner(ref):
                 fixes.append(t)
                 break               # the dead reckoning now carries the fix
-        return flt, ref, fixes
+        return flt, ref, fixes, aid
 
-    flt, ref, fixes = drive(20.0)
+    flt, ref, fixes, aid = drive(20.0)
     assert fixes == [12.0] and ref.t_aided == 12.0
+    assert aid.counts["dr_corner"] == 1 and aid.counts["corner"] == 0   # (--json's counts)
     x, _ = g.to_local(flt.ins.lat, flt.ins.lon)
     assert abs(float(x) - 200.0) < 2.0
     assert np.sqrt(flt.P[0, 0]) < 3.0
-    _, ref, fixes = drive(120.0)
+    _, ref, fixes, _ = drive(120.0)
     assert fixes == [] and ref.t_aided is None

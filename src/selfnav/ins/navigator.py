@@ -1748,6 +1748,12 @@ class Navigator:
                                     else [float(x) for x in mc.centre])}
         if self.cfg.vehicle.speed_hold:
             out["pace_priors"] = self.counts["pace_priors"]
+        rc = getattr(self.road_aid, "counts", None)
+        if rc is not None:
+            # the map's constraints taken (selfnav.roads.aid): road lines, corner legs and arcs,
+            # level-road priors, corner fixes — and the corner fixes of the fault bank's
+            # map-aided dead reckonings (``dr_corner``)
+            out["road_constraints"] = {k: int(v) for k, v in rc.items()}
         md = getattr(self.road_aid, "map_doubt", None)
         if md is not None:
             # the map's doubt (selfnav.roads.doubt): seconds the reported σ was held to the

@@ -308,7 +308,7 @@ class EkfRoadAid:
         self.history = []      # (t, x, y, seg, spread, line share)
         self.corner = self._corner_nodes()
         self.counts = {"line": 0, "leg": 0, "arc": 0, "curve": 0, "grade": 0,
-                       "corner": 0}
+                       "corner": 0, "dr_corner": 0}
         self.curve_sigma = curve_sigma
         self.sigma_corner = sigma_corner
         self.q_along = q_along
@@ -839,7 +839,7 @@ class EkfRoadAid:
         self.apply([{"normal_n": n, "offset": float(e @ n), "sigma": self.sigma_corner,
                      "along_n": u, "along_offset": float(e @ u),
                      "sigma_along": self.sigma_corner, "gate": False}], flt)
-        self.counts["dr_corner"] = self.counts.get("dr_corner", 0) + 1
+        self.counts["dr_corner"] += 1
         ref.t_aided = t
         return True
 
