@@ -260,7 +260,7 @@ class FaultBank:
         self._buf = []
         self._t_step = float(t[-1])
         veh = self.cfg.vehicle
-        for ref in self.dead_reckonings + self.twins:
+        for ref in self.carried:
             f = ref.flt
             i = int(np.searchsorted(t, f.ins.t + 1e-12, side="right"))   # t is increasing
             if i == len(t):
@@ -338,7 +338,7 @@ class FaultBank:
         self.flush()
         self.m_track = [p for p in self.m_track if p[0] >= t - ig.reinit_after_s - 1e-9] + \
             [(t, flt.ins.lat, flt.ins.lon)]
-        for ref in self.dead_reckonings + self.twins:
+        for ref in self.carried:
             ref.track = [r for r in ref.track if r[0] >= t - ig.reinit_after_s - 1e-9] + \
                 [(t, ref.flt.ins.lat, ref.flt.ins.lon, flt.ins.lat, flt.ins.lon)]
         tr = np.array(self.m_track)
@@ -397,6 +397,12 @@ class FaultBank:
     def twins(self) -> list:
         """Their map-aided twins (only the map's look uses them, :meth:`_map_look`)."""
         return [r.twin for r in self.refs + self.witnesses if r.twin is not None]
+
+    @property
+    def carried(self) -> list:
+        """Every dead reckoning the bank carries, twins included: what the hardware's changes
+        (a time offset found, the vibration's noise scale) apply to as they apply to ``M``."""
+        return self.dead_reckonings + self.twins
 
     def mature(self, t):
         """References old enough to judge fixes (at least one reference step old)."""

@@ -928,7 +928,7 @@ class Navigator:
         if self.vib_reference is not None:
             kv = vibration_scale(vibration_level(w_blk, f_blk), self.vib_reference,
                                  self.cfg.adaptation.vibration_cap)
-            for f in self._filters() + [ref.flt for ref in self.bank.dead_reckonings]:
+            for f in self._filters() + [r.flt for r in self.bank.carried]:
                 f.vibration = kv
         for f in self._filters():
             dx = np.zeros(f.nx)
@@ -1126,7 +1126,7 @@ class Navigator:
             print(f"toff check t={t:.1f} est {tau:+.4f}±{s_tau:.4f} state {flt.time_offset:+.4f}±{s_cur:.4f} drift {flt.clock_drift*1e6:.0f} ppm")
         if abs(d) > max(st.time_offset_coarse_s, 3.0 * np.hypot(s_tau, s_cur)):
             # the offset is the hardware's, not a hypothesis': the references take it too
-            for f in [flt] + [r.flt for r in self.bank.dead_reckonings]:
+            for f in [flt] + [r.flt for r in self.bank.carried]:
                 d_f = tau - f.time_offset
                 f.time_offset = tau
                 f.P[i, :] = 0.0
@@ -1151,7 +1151,7 @@ class Navigator:
             # (the clock drift had absorbed the difference: drive_0708 with its IMU stamps
             # 0.25 s off, 87 ms at a σ of 10 ms and −2100 ppm) — the state keeps its value and
             # the filter refines it from a σ that covers the difference, the drift from its prior
-            for f in [flt] + [r.flt for r in self.bank.dead_reckonings]:
+            for f in [flt] + [r.flt for r in self.bank.carried]:
                 f.P[i, :] = 0.0
                 f.P[:, i] = 0.0
                 f.P[i, i] = s_cur ** 2 + d * d
