@@ -807,12 +807,14 @@ class EkfRoadAid:
 
     # ------------------------------------------------------------------ corners
     def dead_reckoning_corner(self, ref) -> bool:
-        """A corner fix for one of the fault bank's dead reckonings (``ref``: its
+        """A corner fix for one of the fault bank's map-aided twins (``ref``: its
         :class:`~selfnav.ins.hypotheses.Reference`, whose ``watch`` follows its turns; called
-        after each of its steps, looked at 0.5 s apart at most): the map places the turn it has just driven as :meth:`_corner_fix` places
-        the navigator's filter's — a dead reckoning the map aids stays the hypothesis "the
-        fixes are faulty since it branched" (the map is neither side), its σ road-sized where
-        the roads turn instead of a consumer IMU's free growth. True when a fix was applied."""
+        after each of its steps, looking at least 0.5 s apart): the map places the turn it has
+        just driven as :meth:`_corner_fix` places the navigator's filter's. A dead reckoning
+        the map aids stays the hypothesis "the fixes are faulty since it branched" (the map is
+        neither side), its position road-sized where the roads turn instead of a consumer
+        IMU's free growth — but its σ after a fix is a road's, which its error outgrows, so
+        the fault bank's envelope tests do not use it. True when a fix was applied."""
         flt = ref.flt
         if ref.watch is None:
             ref.watch = TurnWatch()
