@@ -18,8 +18,7 @@ from selfnav.ins.align import healthy_until, robust_init
 from selfnav.ins.config import chi2_999
 from selfnav.ins.measurements import LevelRoad, RoadLine
 from selfnav.quantiles import binom_isf
-from selfnav.roads.corners import (MAX_CORNER_TURN, TURN_RATE, TurnWatch, corner_offset,
-                                   line_intersection)
+from selfnav.roads.corners import MAX_CORNER_TURN, TURN_RATE, TurnWatch, corner_offset
 from selfnav.roads.doubt import MapDoubt
 from selfnav.roads.evidence import SIGMA_ROAD_M, on_roads_llr, thin_track
 from selfnav.roads.graph import RoadGraph
@@ -836,11 +835,7 @@ class EkfRoadAid:
                           self.sigma_corner)
         if e is None:
             return False
-        u = np.array([np.sin(hdg), np.cos(hdg)])
-        n = np.array([u[1], -u[0]])
-        self.apply([{"normal_n": n, "offset": float(e @ n), "sigma": self.sigma_corner,
-                     "along_n": u, "along_offset": float(e @ u),
-                     "sigma_along": self.sigma_corner, "gate": False}], flt)
+        self.apply([self._corner_measurement(e, hdg)], flt)
         self.counts["dr_corner"] += 1
         ref.t_aided = t
         return True
@@ -867,10 +862,16 @@ class EkfRoadAid:
         e = corner_offset(self.g, self.pf.off, self.pf.succ, V, h0, hdg, P2, self.sigma_corner)
         if e is None:
             return None
-        u = np.array([np.sin(hdg), np.cos(hdg)])
-        n = np.array([u[1], -u[0]])
         self.counts["corner"] += 1
         self.corner_log.append((t, float(e[0]), float(e[1])))
+        return {**self._corner_measurement(e, hdg), "e": e, "target": p_ins - e}
+
+    def _corner_measurement(self, e, hdg) -> dict:
+        """The corner fix of a position error ``e`` (E, N m) after a turn onto heading ``hdg``:
+        across and along the new road, σ ``sigma_corner`` each, not gated (its own test chose
+        the corner)."""
+        u = np.array([np.sin(hdg), np.cos(hdg)])
+        n = np.array([u[1], -u[0]])
         return {"normal_n": n, "offset": float(e @ n), "sigma": self.sigma_corner,
                 "along_n": u, "along_offset": float(e @ u), "sigma_along": self.sigma_corner,
-                "gate": False, "e": e, "target": p_ins - e}
+                "gate": False}
