@@ -130,6 +130,45 @@ def test_odometer_jacobian_matches_finite_differences():
     assert (h0 - _h(f)) / eps == pytest.approx(H[lay.odo.start], abs=1e-5)
 
 
+def test_wheel_speed_is_compared_at_its_own_stamp_and_does_not_see_the_time_offset():
+    """The wheel speed shares the IMU's clock: the model extrapolates the INS's forward speed
+    from its own stamp to the sample's along the acceleration (analytic), and the IMU time
+    offset against the fixes has no column (a −a·δε term had the odometer witness it)."""
+    from selfnav.ins.measurements import WheelSpeed
+
+    cfg = ins.FilterConfig.for_grade("industrial", odometer=True, time_offset=True)
+    f = ins.InsGnssFilter(cfg, 5.0, 1.0, 0.5, 10.0, np.array([6.0, 8.0, 0.0]),
+                          att.dcm_nb_from_euler(0.0, 0.0, 0.7))
+    f._f_n = np.array([0.3, 0.4, 0.0]) + np.array([0.0, 0.0, f.gravity(1.0, 10.0)])
+    now = WheelSpeed(7.0, 0.05).model(f)
+    later = WheelSpeed(7.0, 0.05, stamp=f.ins.t + 0.2).model(f)
+    fwd = f.ins.C_nb[1]                             # the body's forward axis in ENU
+    a_f = float(fwd @ np.array([0.3, 0.4, 0.0]))
+    assert later.r[0] - now.r[0] == pytest.approx((1.0 + f.odo_scale) * a_f * 0.2, rel=1e-6)
+    assert f.layout.toff is not None
+    assert later.H[0, f.layout.toff.start] == 0.0
+    assert np.array_equal(later.H, now.H)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("offset_s", [0.0, 0.25])
+def test_imu_and_wheel_speed_on_one_clock_the_offset_is_learnt_honestly(drive, offset_s):
+    """IMU and wheel speed logged on one clock ``offset_s`` behind the fixes' (both stamps
+    shifted): the offset the navigator reports is within 3σ of it. Measured (seed 11, 300 s,
+    consumer IMU): 0.046 ± 0.139 s and 0.264 ± 0.139 s; before stop 64 the odometer was
+    modelled as stamped in true time and both read 0.07 s at σ 2 ms (33σ and 83σ off)."""
+    from dataclasses import replace
+
+    from selfnav import api
+
+    imu = replace(drive.imu, t=drive.imu.t - offset_s)
+    odo = replace(drive.odometer, t=drive.odometer.t - offset_s)
+    sol = api.navigate(imu, drive.gnss.as_gnss(), odometer=odo)
+    eps, s = sol.stats["imu_time_offset_s"], sol.stats["imu_time_offset_sigma_s"]
+    assert abs(eps - offset_s) < 3.0 * s, (eps, s)
+    assert s < 0.3                                  # below its prior: learnt, not assumed
+
+
 def test_wheel_speed_after_the_start_without_its_state_warns_once():
     """The odometer state is made at the start when wheel speed arrived before it; samples
     that come only later are dropped with one warning (not silently)."""

@@ -17,8 +17,10 @@ and says so). Inside, in order:
 2. **Time**: the IMU stamps plus the time offset (applied + the filter's estimate) are true
    time; fixes, wheel speed and magnetometer samples are queued by true time and processed
    when the IMU reaches them, against the state at that instant (the lead of under one IMU
-   sample is in the measurement model). A fix that arrives after the IMU has passed it is
-   processed at once, against the state extrapolated back.
+   sample is in the measurement model). Wheel speed and the magnetometer come on the IMU's
+   clock (one logger): they are queued at their stamp plus the offset and compared with the
+   INS at their own stamp, so the offset's error does not enter them. A fix that arrives
+   after the IMU has passed it is processed at once, against the state extrapolated back.
 3. **Epochs**: every ``vehicle.aid_step`` the vehicle constraints (NHC or ZUPT), the road aid;
    each fix through the fault-hypothesis bank (:mod:`selfnav.ins.hypotheses`), which decides
    (:class:`~selfnav.ins.policy.FixDecision`) and may reset the filter to a dead-reckoning
@@ -512,30 +514,40 @@ class Navigator:
         return FixDecision(fx.t, FixStatus.PENDING, "waiting for the IMU to reach its time")
 
     def add_odometer(self, t, speed_mps, sigma=None):
-        """A wheel-speed sample (forward speed at the rear axle, m/s) at true time ``t``;
+        """A wheel-speed sample (forward speed at the rear axle, m/s) stamped ``t`` on the
+        IMU's clock, as :meth:`add_imu`'s samples are (wheel speed and IMU logged together);
         σ default ``vehicle.odometer_sigma``. Samples closer than ``vehicle.odometer_step``
         are thinned."""
+        t = float(t) + self.offset_applied
         if self.flt is None:
-            self.startup.odometer.append((float(t), float(speed_mps), sigma))
+            self.startup.odometer.append((t, float(speed_mps), sigma))
             return
-        self._push_odometer(float(t), float(speed_mps), sigma)
+        self._push_odometer(t, float(speed_mps), sigma)
 
     def add_magnetometer(self, t, mag_b):
-        """A magnetometer sample (body RFU, any unit) at true time ``t``: before the start, the
-        start's heading where the course gives none (:mod:`selfnav.ins.anystart`); after it,
-        with ``vehicle.use_magnetometer``, a heading measurement (tilt-compensated, IGRF
-        declination) at most ``vehicle.mag_step`` apart."""
+        """A magnetometer sample (body RFU, any unit) stamped ``t`` on the IMU's clock (a
+        column of the IMU's rows): before the start, the start's heading where the course
+        gives none (:mod:`selfnav.ins.anystart`); after it, with ``vehicle.use_magnetometer``,
+        a heading measurement (tilt-compensated, IGRF declination) at most
+        ``vehicle.mag_step`` apart."""
         veh = self.cfg.vehicle
-        if float(t) - self._heading_t < veh.mag_step - 1e-9:
+        t = float(t) + self.offset_applied
+        if t - self._heading_t < veh.mag_step - 1e-9:
             return
         if self.flt is None:       # the start's heading (selfnav.ins.anystart), updates or not
-            self._heading_t = float(t)
-            self.startup.magnetometer.append((float(t), np.asarray(mag_b, float)))
+            self._heading_t = t
+            self.startup.magnetometer.append((t, np.asarray(mag_b, float)))
             return
         if not veh.use_magnetometer:
             return
-        self._heading_t = float(t)
-        self._push(float(t), _KIND_HEADING, (float(t), np.asarray(mag_b, dtype=float)))
+        self._heading_t = t
+        self._push_imu_clock(t, _KIND_HEADING, (t, np.asarray(mag_b, dtype=float)))
+
+    def _push_imu_clock(self, t, kind, payload):
+        """Queue a sample stamped on the IMU's clock (``t``: stamp plus the applied offset):
+        due when the INS reaches its stamp — the stamp plus the offset estimated now — so the
+        offset's error shifts it as it shifts the IMU and does not enter its model."""
+        self._push(t + self.flt.time_offset, kind, payload)
 
     def _push_odometer(self, t, speed, sigma):
         if self.flt.layout.odo is None:
@@ -553,7 +565,8 @@ class Navigator:
         if t - last < self.cfg.vehicle.odometer_step - 1e-9:
             return
         self._t_odo = t
-        self._push(t, _KIND_ODO, (speed, sigma))
+        # the model extrapolates from wherever the INS is when it comes due to its stamp
+        self._push_imu_clock(t, _KIND_ODO, (speed, sigma, t - self.flt.time_offset_applied))
 
     def _push(self, t, kind, payload):
         heapq.heappush(self._events, (float(t), kind, self._seq, payload))
@@ -707,7 +720,7 @@ class Navigator:
                 self._push_odometer(t_o, v_o, s_o)
         for (t_m, m_b) in st.magnetometer:
             if t_m > t0 and cfg.vehicle.use_magnetometer:
-                self._push(t_m, _KIND_HEADING, (t_m, m_b))
+                self._push_imu_clock(t_m, _KIND_HEADING, (t_m, m_b))
         k = imu.t > t0_stamp + 1e-12
         self._catching_up = True
         if k.any():
@@ -848,10 +861,10 @@ class Navigator:
         elif kind == _KIND_HEADING:
             self._heading(payload)
         elif kind == _KIND_ODO:
-            speed, sigma = payload
+            speed, sigma, stamp = payload
             s = cfg.vehicle.odometer_sigma if sigma is None else float(sigma)
             for f in self._filters():
-                m = WheelSpeed(speed, s).model(f)
+                m = WheelSpeed(speed, s, stamp).model(f)
                 q = f.nis(m)
                 dx = f.update(m, max(1.0, q / self._gate_v))
                 if f is flt:
@@ -1840,9 +1853,9 @@ def feed(nav: Navigator, imu, gnss=None, *, odometer=None, progress=None,
                             col(gnss.quality, k), sigma_v_m=col(gnss.sigma_v_m, k),
                             sigma_vel_mps=col(gnss.sigma_vel_mps, k))
             elif kind == 1:
-                nav.add_odometer(odometer.t[k] + off, odometer.speed_mps[k])
+                nav.add_odometer(odometer.t[k], odometer.speed_mps[k])
             else:
-                nav.add_magnetometer(ts[k], mag[k])
+                nav.add_magnetometer(imu.t[k], mag[k])
             a += 1
         if i0 >= n:
             break
