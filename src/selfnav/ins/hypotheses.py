@@ -396,7 +396,7 @@ class FaultBank:
     @property
     def twins(self) -> list:
         """Their map-aided twins (only the map's look uses them, :meth:`_map_look`)."""
-        return [r.twin for r in self.refs + self.witnesses if r.twin is not None]
+        return [r.twin for r in self.dead_reckonings if r.twin is not None]
 
     @property
     def carried(self) -> list:
