@@ -566,7 +566,7 @@ class Navigator:
             return
         self._t_odo = t
         # the model extrapolates from wherever the INS is when it comes due to its stamp
-        self._push_imu_clock(t, _KIND_ODO, (speed, sigma, t - self.flt.time_offset_applied))
+        self._push_imu_clock(t, _KIND_ODO, (speed, sigma, t - self.offset_applied))
 
     def _push(self, t, kind, payload):
         heapq.heappush(self._events, (float(t), kind, self._seq, payload))
