@@ -70,3 +70,27 @@ def test_a_joined_hypothesis_holds_its_weight_and_the_collapse_covers_both(weigh
     north = enu_offset(f.ins.lat, f.ins.lon, f.ins.h, other.ins.lat, other.ins.lon, f.ins.h)[1]
     assert north == pytest.approx(12.0, rel=0.01)
     assert P[1, 1] == pytest.approx(f.P[1, 1] + weight * north**2, rel=1e-6)
+
+
+def test_a_snapshot_of_the_sum_is_its_own_and_names_its_hypotheses_as_the_sum_does():
+    """The fault bank's fallback while the heading is undecided: a copy of the whole sum.
+    What the sum does after it (a correction of one filter, pruning) leaves the copy as it
+    was, and a hypothesis keeps its name through the pruning: the copy's hypothesis of the
+    same name is the same filter as it stood."""
+    cfg, f = _filter(None)
+    hyp = split_heading(f, cfg)
+    snap = hyp.snapshot()
+    n = len(hyp.filters)
+    assert np.array_equal(snap.ids, np.arange(n)) and np.allclose(snap.weights, hyp.weights)
+    assert all(a is not b and np.allclose(a.P, b.P) for a, b in zip(snap.filters, hyp.filters))
+    lat0 = [g.ins.lat for g in snap.filters]
+    keep = np.argsort(hyp.logw)[-3:]                     # three survive the pruning
+    hyp.logw[np.setdiff1d(np.arange(n), keep)] -= 100.0
+    hyp.prune()
+    hyp.filters[0].ins.set_state(lat=hyp.filters[0].ins.lat + 1e-5)
+    hyp.filters[0].P *= 4.0
+    assert len(hyp.filters) == 3 and len(snap.filters) == n
+    assert [g.ins.lat for g in snap.filters] == lat0
+    assert np.array_equal(hyp.ids, np.sort(keep))
+    for k, i in enumerate(hyp.ids[1:], start=1):
+        assert np.allclose(snap.filters[int(i)].P, hyp.filters[k].P)

@@ -151,6 +151,8 @@ class HeadingHypotheses:
         #: terms per hypothesis, by source
         self.evidence = {}
         self.acc = [[0.0, np.zeros(3), np.zeros(3)] for _ in self.filters]
+        #: stable names of the hypotheses (a copy of the sum names them as the sum does)
+        self.ids = np.arange(len(self.filters))
         self.split_sigma = sub
         self.prune_ratio = prune_ratio
         self.resolved_weight = resolved_weight
@@ -170,6 +172,7 @@ class HeadingHypotheses:
         self.logw = np.append(self.logw + math.log1p(-weight), math.log(weight))
         self.deltas = np.append(self.deltas, delta)
         self.bias_deltas = np.append(self.bias_deltas, 0.0)
+        self.ids = np.append(self.ids, int(self.ids.max()) + 1 if len(self.ids) else 0)
         self.evidence = {k: np.append(v, 0.0) for k, v in self.evidence.items()}
         self.spawned += 1
         self._normalise()
@@ -257,14 +260,17 @@ class HeadingHypotheses:
         keep = self.logw >= np.max(self.logw) - math.log(self.prune_ratio)
         if keep.all():
             return
-        idx = np.flatnonzero(keep)
+        self._select(np.flatnonzero(keep))
+        self._normalise()
+
+    def _select(self, idx):
         self.filters = [self.filters[i] for i in idx]
         self.acc = [self.acc[i] for i in idx]
         self.logw = self.logw[idx]
         self.deltas = self.deltas[idx]
         self.bias_deltas = self.bias_deltas[idx]
+        self.ids = self.ids[idx]
         self.evidence = {k: v[idx] for k, v in self.evidence.items()}
-        self._normalise()
 
     def resolved(self, t) -> bool:
         """One hypothesis left, or holding ``resolved_weight``, or the others merged into it
@@ -308,6 +314,28 @@ class HeadingHypotheses:
         w = self.weights
         P = sum(w[j] * g.P for j, g in enumerate(self.filters)) + self.spread(k)
         return 0.5 * (P + P.T)
+
+    def snapshot(self) -> "HeadingHypotheses":
+        """An independent copy of the sum (every hypothesis' filter copied, the weights and
+        the evidence kept), its covariances propagated to now: a fallback of the fault bank
+        (:class:`selfnav.ins.hypotheses.SumFallback`)."""
+        import copy as _copy
+
+        self.propagate()
+        out = _copy.copy(self)
+        out.filters = []
+        for f in self.filters:
+            g = f.copy()
+            g.track_transition = f.track_transition
+            g.q_scale, g.bias_scale = f.q_scale, f.bias_scale
+            out.filters.append(g)
+        out.logw = self.logw.copy()
+        out.deltas = self.deltas.copy()
+        out.bias_deltas = self.bias_deltas.copy()
+        out.ids = self.ids.copy()
+        out.evidence = {k: np.array(v, copy=True) for k, v in self.evidence.items()}
+        out.acc = [[0.0, np.zeros(3), np.zeros(3)] for _ in self.filters]
+        return out
 
     def collapse(self):
         """The best hypothesis, its covariance that of the whole sum about it."""

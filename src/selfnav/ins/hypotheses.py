@@ -88,6 +88,21 @@ class Reference:
 
 
 @dataclass
+class SumFallback:
+    """The start's heading sum as it stood at ``t0``, carried since by the IMU and the vehicle
+    constraints only (each hypothesis a :class:`Reference` of :attr:`refs`): a state from
+    before a drag to go back to while the heading is still undecided."""
+
+    t0: float
+    hyp: object
+    refs: list = field(default_factory=list)
+
+    @classmethod
+    def of(cls, t0, hyp):
+        return cls(t0, hyp, [Reference(t0, f) for f in hyp.filters])
+
+
+@dataclass
 class Episode:
     """A stretch where the fixes and the inertial solution disagree (or there are none)."""
 
@@ -136,6 +151,7 @@ class Verdict:
     nis: float
     apply: bool = False                 # update M with the fix
     reset_to: object = None             # a reference to reset M to (a filter)
+    reset_sum: object = None            # … or a heading sum to go back to (a SumFallback's)
     excluded_since: float | None = None  # fused fixes after this time are now excluded
     widen: np.ndarray | None = None      # open M's position σ to this offset first (INS fault)
     reinit_from: list | None = None      # fixes to restart M from (the GNSS branch)
@@ -178,6 +194,14 @@ class FaultBank:
         self.diag = None                # a list to collect (t, age, q_fix, q_sep, sep, κ) in
         self.k_pl = normal_quantile(ig.integrity_risk)
         self.refs: list[Reference] = []
+        #: the start's heading sum branched while it is undecided (:meth:`maintain`): a
+        #: reference branched from one filter of an undecided sum is no envelope — only a
+        #: whole sum is a state to go back to
+        self.fallbacks: list[SumFallback] = []
+        #: set by the navigator: ``(fallback's sum, t) -> bool``, does the sum as it stood
+        #: before a drag found since ``t`` hold another heading hypothesis best than ``M``'s
+        #: now? (None: always)
+        self.sum_choice_differs = None
         self.episode: Episode | None = None
         self.outage: Episode | None = None
         self.episodes: list[Episode] = []
@@ -211,6 +235,7 @@ class FaultBank:
         """The navigator (re)started at ``t``: no reference of the old INS stands for the new
         one, and none of its own exists yet."""
         self.refs = []
+        self.fallbacks = []
         self.t_started = float(t)
         self._map_alarm = None
         self.m_track = []
@@ -222,7 +247,7 @@ class FaultBank:
         ``reference_step_s``. Whether the samples were still is known only when the
         navigator has judged their aiding block (:meth:`judged`): until then they count as
         moving."""
-        if not (self.refs or self.witnesses):
+        if not (self.refs or self.witnesses or self.fallbacks):
             return
         step = self.cfg.integrity.reference_step_s - 1e-9
         while len(t):
@@ -234,7 +259,7 @@ class FaultBank:
                 return
             self._buf.append([t[:j + 1], dtheta[:j + 1], dv[:j + 1], dt[:j + 1], None])
             self.flush()
-            if not (self.refs or self.witnesses):
+            if not (self.refs or self.witnesses or self.fallbacks):
                 return
             t, dtheta, dv, dt = t[j + 1:], dtheta[j + 1:], dv[j + 1:], dt[j + 1:]
 
@@ -285,7 +310,7 @@ class FaultBank:
             if ref.aided:
                 self.road_aid.dead_reckoning_corner(ref)
 
-    def maintain(self, t, flt, *, resolving: bool = False):
+    def maintain(self, t, flt, *, resolving: bool = False, source=None):
         """Branch a new reference from ``M`` every ``branch_every_s`` while the GNSS is healthy;
         keep the oldest reference of each age octave, none older than ``max_age_s``. With a
         road map, also **witnesses** while no mature reference stands (``resolving``: ``M`` is
@@ -293,16 +318,24 @@ class FaultBank:
         clock but not judged healthy first, used by no envelope test — only by the map
         (:meth:`_map_look`), which judges their tracks itself. (The references' health clock
         can stall for minutes: a drag soon after a consumer start kept reopening ``M``'s
-        covariance, and each reopening restarts the clock.)"""
+        covariance, and each reopening restarts the clock.) While ``resolving``, on the
+        references' clock, a **fallback** instead of a reference: ``source()``, a copy of the
+        whole heading sum (:class:`SumFallback`), for the innovation sums to go back to
+        (:meth:`judge`)."""
         ig = self.cfg.integrity
         if not ig.bank:
             return
-        if not resolving and self.episode is None and self.t_healthy is not None \
+        if self.episode is None and self.t_healthy is not None \
                 and t - self.t_healthy >= ig.branch_after_s - 1e-9 \
                 and t - self._t_branch >= ig.branch_every_s - 1e-9:
-            self.flush()
-            self.refs.append(self._branch(t, flt))
-            self._t_branch = t
+            if not resolving:
+                self.flush()
+                self.refs.append(self._branch(t, flt))
+                self._t_branch = t
+            elif source is not None:
+                self.flush()
+                self.fallbacks.append(SumFallback.of(t, source()))
+                self._t_branch = t
         self._prune(t)
         if self.road_aid is None or self.episode is not None:
             return
@@ -371,6 +404,7 @@ class FaultBank:
 
     def _prune(self, t):
         self.refs = self._octaves(t, self.refs)
+        self.fallbacks = self._octaves(t, self.fallbacks)
 
     def _octaves(self, t, refs):
         """The oldest of each age octave, none older than ``max_age_s``."""
@@ -402,7 +436,7 @@ class FaultBank:
     def carried(self) -> list:
         """Every dead reckoning the bank carries, twins included: what the hardware's changes
         (a time offset found, the vibration's noise scale) apply to as they apply to ``M``."""
-        return self.dead_reckonings + self.twins
+        return self.dead_reckonings + self.twins + [r for fb in self.fallbacks for r in fb.refs]
 
     def mature(self, t):
         """References old enough to judge fixes (at least one reference step old)."""
@@ -456,13 +490,31 @@ class FaultBank:
             # the fault began within the window: back to the youngest reference before it
             t_from = t - n * self.fix_dt
             self.flush()
-            before = [r for r in self.mature(t) if r.t0 <= t_from]
+            # (a fallback of the start's heading sum counts here: the sums find the drag, the
+            # fallback is the sum from before it)
+            before = sorted((r for r in self.mature(t) + self.fallbacks
+                             if r.t0 <= t_from and t - r.t0 >= self.cfg.integrity.min_age_s),
+                            key=lambda r: r.t0)
+            if before and isinstance(before[-1], SumFallback) \
+                    and self.sum_choice_differs is not None:
+                # back to the youngest sum that held another heading hypothesis best than M
+                # is now, if the sum was undecided when the drag began (the drag may have
+                # chosen M's — the sums date a drag late); none such: M, with the fixes
+                # since, knows more than the sum then did (docs/ekf.md)
+                sums = [r for r in before if isinstance(r, SumFallback)
+                        and self.sum_choice_differs(r.hyp, t_from)]
+                before = sums[-1:]
             if before:
                 ref = before[-1]
                 # the episode starts when the fault did (as far as the sums tell); M goes
                 # back to the reference before it
                 self._open(max(ref.t0, t_from), reset=True)
                 self.refs = [r for r in self.refs if r.t0 <= ref.t0]
+                self.fallbacks = [r for r in self.fallbacks if r.t0 <= ref.t0]
+                if isinstance(ref, SumFallback):
+                    return Verdict(FixStatus.REJECTED, f"{why} since {ref.t0:.1f} s (back to "
+                                   f"the start's {len(ref.hyp.filters)} heading hypotheses "
+                                   f"then)", nis, reset_sum=ref.hyp, excluded_since=ref.t0)
                 return Verdict(FixStatus.REJECTED, f"{why} since {ref.t0:.1f} s", nis,
                                reset_to=ref.flt, excluded_since=ref.t0)
             self._open(t, reset=False)
@@ -512,15 +564,20 @@ class FaultBank:
         wins = self.cfg.integrity.innovation_windows
         gate = self.reference_gate(len(wins) / 2.0)
         recent = np.array(self.innov[-wins[-1]:])
+        hit = None
         for n in wins:
             if len(recent) < n:
                 break
             m = recent[-n:].sum(axis=0)
             q = float(m @ m) / n
             if q > gate * self.cfg.integrity.reference_safety:
-                return (f"the last {n} fixes pull the same way (their innovations sum to "
-                        f"χ² {q:.3g}): a drag"), n
-        return None
+                hit = (q, n)
+                break
+        if hit is None:
+            return None
+        q, n = hit
+        return (f"the last {n} fixes pull the same way (their innovations sum to "
+                f"χ² {q:.3g}): a drag"), n
 
     def reference_gate(self, n_refs: float) -> float:
         """The χ² (2 dof) gate of the references' tests: ``false_alarms_per_hour`` shared
@@ -945,6 +1002,7 @@ class FaultBank:
         (:meth:`doubt`). Kept, a reference branched from a start 41° off in heading at σ 4.5°
         reset ``M`` to itself, 220 m off, for four minutes (simulated)."""
         self.refs = []
+        self.fallbacks = []
         self.t_healthy = float(t)
 
     def forget_innovations(self):

@@ -384,6 +384,7 @@ class Navigator:
         self._dt_nominal = None
         self.restarts = []
         self._hyp = None               # the heading hypotheses of a start (selfnav.ins.headings)
+        self._collapsed_id = None      # the name of the hypothesis the last sum collapsed to
 
     # ================================================================== input
     def add_imu(self, t, gyro_rad_s, accel_m_s2) -> NavState:
@@ -610,6 +611,7 @@ class Navigator:
         self._rate_hist.clear()
         self._imu_still = self._still_from_braking = self._braked_to_rest = False
         self._hyp = None
+        self._collapsed_id = None
         if self.magcal is not None:
             self.magcal.new_stretch()      # the gyros' heading has a gap
 
@@ -670,6 +672,7 @@ class Navigator:
         if not cfg.adaptation.vibration:
             self.vib_reference = None
         self.bank = FaultBank(cfg, self.adapter)
+        self.bank.sum_choice_differs = self._sum_choice_differs
         if self.road_aid is not None and hasattr(self.road_aid, "track_evidence"):
             self.bank.road_aid = self.road_aid
         self._ins_vouched = False
@@ -1004,7 +1007,7 @@ class Navigator:
                         self._dx = self._dx + dx
         if self._hyp is not None:
             # no references or time-offset search until resolved; the map's witnesses only
-            self.bank.maintain(te, flt, resolving=True)
+            self.bank.maintain(te, flt, resolving=True, source=self._hyp.snapshot)
             return
         self.bank.maintain(te, flt)
         if flt.layout.toff is not None:
@@ -1288,6 +1291,10 @@ class Navigator:
             v = self.bank.judge(judge_flt, mh, fx.t, (fx.lat, fx.lon))
         else:
             v = self.bank.judge(flt, mh, fx.t, (fx.lat, fx.lon))
+        if v.reset_sum is not None:
+            self._restore_sum(v.reset_sum, v.excluded_since)
+            self._log(fx, v.status, v.reason, v.nis, nis_v, np.nan)
+            return
         if self._hyp is not None:
             # the heading hypotheses: the bank judges the fix on M (its χ² gate and its
             # episodes: outliers while the heading is resolved); a plain "used" goes into
@@ -1436,6 +1443,7 @@ class Navigator:
         hyp = self._hyp
         self.start_info["heading_resolved_s"] = float(t)
         self.start_info["heading_resolved_weight"] = float(np.max(hyp.weights))
+        self._collapsed_id = int(hyp.ids[hyp.best])
         self.flt = hyp.collapse()
         self._hyp = None
         self._reset_flag = True
@@ -1513,6 +1521,31 @@ class Navigator:
         self.log["nis_vel"][k] = nis_vel
         self._decisions.append(FixDecision(fx.t, status, reason, nis_h))
 
+    def _sum_choice_differs(self, fb_hyp, t_from) -> bool:
+        """Does the start's heading sum as the bank's fallback holds it (from before a drag
+        found since ``t_from``) hold another hypothesis best than the one ``M`` is now — and
+        was the sum still undecided when the drag began? (One that had decided before it
+        decided on clean fixes: going back undid that; simulated odometer drives of seed 103
+        and 2, 1863593681399775698 3.3 → 18.9 m, 2200301185186493838 3.5 → 6.1 m.)"""
+        if self._hyp is None and self.start_info.get("heading_resolved_s", np.inf) < t_from:
+            return False
+        now = (int(self._hyp.ids[self._hyp.best]) if self._hyp is not None
+               else self._collapsed_id)
+        return now is None or int(fb_hyp.ids[fb_hyp.best]) != now
+
+    def _restore_sum(self, hyp, since):
+        """The start's heading sum as the bank's fallback carried it since ``since`` (a drag
+        found that began before any reference): ``M`` its best hypothesis again."""
+        old = self.flt
+        new = hyp.snapshot()
+        for f in new.filters:
+            f.track_transition = self.smoother
+            f.q_scale, f.bias_scale = old.q_scale, old.bias_scale
+        self._hyp = new
+        self.flt = new.filters[new.best]
+        self._reset_flag = True
+        self._exclude_since(since)
+
     def _reset_to(self, ref_flt, since):
         """``M`` becomes a copy of a dead-reckoning reference (a fault since ``since``)."""
         old = self.flt
@@ -1522,6 +1555,10 @@ class Navigator:
         # the reference was last moved at its own step: bring it to M's sample
         self.flt = new
         self._reset_flag = True
+        self._exclude_since(since)
+
+    def _exclude_since(self, since):
+        """The fused fixes after ``since`` are marked excluded (a fault since then)."""
         if since is not None:
             for k in range(len(self.fixes) - 1, -1, -1):
                 if self.log["t"][k] <= since:
