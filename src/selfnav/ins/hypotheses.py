@@ -198,9 +198,9 @@ class FaultBank:
         #: reference branched from one filter of an undecided sum is no envelope — only a
         #: whole sum is a state to go back to
         self.fallbacks: list[SumFallback] = []
-        #: set by the navigator: ``(fallback's sum, t) -> bool``, does the sum as it stood
-        #: before a drag found since ``t`` hold another heading hypothesis best than ``M``'s
-        #: now? (None: always)
+        #: set by the navigator: ``(fallback's sum, t) -> bool``, may the bank go back to it
+        #: for a drag found since ``t`` — was the sum undecided then, and does the copy hold
+        #: another heading hypothesis best than ``M`` is now? (None: always)
         self.sum_choice_differs = None
         self.episode: Episode | None = None
         self.outage: Episode | None = None
@@ -564,20 +564,15 @@ class FaultBank:
         wins = self.cfg.integrity.innovation_windows
         gate = self.reference_gate(len(wins) / 2.0)
         recent = np.array(self.innov[-wins[-1]:])
-        hit = None
         for n in wins:
             if len(recent) < n:
                 break
             m = recent[-n:].sum(axis=0)
             q = float(m @ m) / n
             if q > gate * self.cfg.integrity.reference_safety:
-                hit = (q, n)
-                break
-        if hit is None:
-            return None
-        q, n = hit
-        return (f"the last {n} fixes pull the same way (their innovations sum to "
-                f"χ² {q:.3g}): a drag"), n
+                return (f"the last {n} fixes pull the same way (their innovations sum to "
+                        f"χ² {q:.3g}): a drag"), n
+        return None
 
     def reference_gate(self, n_refs: float) -> float:
         """The χ² (2 dof) gate of the references' tests: ``false_alarms_per_hour`` shared
