@@ -325,9 +325,8 @@ class HeadingHypotheses:
         out = _copy.copy(self)
         out.filters = []
         for f in self.filters:
-            g = f.copy()
+            g = f.copy()            # (its noise scales come with it; not its smoother flag)
             g.track_transition = f.track_transition
-            g.q_scale, g.bias_scale = f.q_scale, f.bias_scale
             out.filters.append(g)
         out.logw = self.logw.copy()
         out.deltas = self.deltas.copy()

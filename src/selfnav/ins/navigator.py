@@ -1536,11 +1536,9 @@ class Navigator:
     def _restore_sum(self, hyp, since):
         """The start's heading sum as the bank's fallback carried it since ``since`` (a drag
         found that began before any reference): ``M`` its best hypothesis again."""
-        old = self.flt
         new = hyp.snapshot()
         for f in new.filters:
-            f.track_transition = self.smoother
-            f.q_scale, f.bias_scale = old.q_scale, old.bias_scale
+            self._as_m(f)
         self._hyp = new
         self.flt = new.filters[new.best]
         self._reset_flag = True
@@ -1548,14 +1546,17 @@ class Navigator:
 
     def _reset_to(self, ref_flt, since):
         """``M`` becomes a copy of a dead-reckoning reference (a fault since ``since``)."""
-        old = self.flt
-        new = ref_flt.copy()
-        new.track_transition = self.smoother
-        new.q_scale, new.bias_scale = old.q_scale, old.bias_scale
         # the reference was last moved at its own step: bring it to M's sample
-        self.flt = new
+        self.flt = self._as_m(ref_flt.copy())
         self._reset_flag = True
         self._exclude_since(since)
+
+    def _as_m(self, f):
+        """``f`` made ready to stand for ``M``: its transitions kept for the smoother, and the
+        noise scales ``M`` carries now (the hardware's, learnt since ``f`` was branched)."""
+        f.track_transition = self.smoother
+        f.q_scale, f.bias_scale = self.flt.q_scale, self.flt.bias_scale
+        return f
 
     def _exclude_since(self, since):
         """The fused fixes after ``since`` are marked excluded (a fault since then)."""
