@@ -527,14 +527,36 @@ def test_a_drag_that_chooses_the_starts_heading_hypothesis_goes_back_to_the_sum_
 
 
 @pytest.mark.slow
+@pytest.mark.parametrize("run_seed, rms_m", [(4929174180326169418, 9.0),
+                                             (6860796862989826794, 12.0)])
+def test_a_drag_found_late_goes_back_to_a_reference_from_before_it(run_seed, rms_m):
+    """Simulated issue-19 campaign drive 4929174180326169418 (master seed 211, Kotka
+    Karhula): a drag from 402.6 s, found by the innovation sums over 16 fixes at 430 s. The
+    reference from before those 16 fixes (414 s) had taken the drag's first 11 s: reset to
+    it, the solution ran 14 m across its road at σ 5–20 m, the road lines refused as too far
+    for that σ, 45 s off the route. A drag grows from nothing, and the sums see only its grown
+    part: the bank goes back to the reference from before twice the window (398 s). Where
+    none from then may be gone back to, the one from before the window still is (drive
+    6860796862989826794 of master seed 2, a drift from 179 s found over 32 fixes at 210 s:
+    the only one older than twice the window was a sum fallback the drag had not chosen, and
+    kept without a reset the solution followed the drift, 63 m RMS)."""
+    from selfnav import campaigns
+
+    row = campaigns.run_roadnav(run_seed, dict(campaigns.ROADNAV_DEFAULTS))
+    assert row["off_route_s"] < 20.0, row["off_route_s"]
+    assert row["horizontal_rms_m"] < rms_m, row["horizontal_rms_m"]
+
+
+@pytest.mark.slow
 def test_a_turn_while_dead_reckoning_is_placed_at_its_junction(karhula):
     """A consumer car dead-reckons through a 118 s white window from 101 s (simulated issue-19
     campaign drive 6560021803722912080 of master seed 2, Kotka Karhula); its INS has not yet
-    stood the fixes' test, so the map gives no road lines once its σ passes 10 m. By the 60°
-    turn at 140 s it is 35–40 m ahead along the road; the turn the gyros measured happened at
-    the one junction within its σ, and the corner fix says which: from 160 s to the window's
-    end the error stays within 4.7–10.1 m (largest per 10 s). Without the corner (before stop
-    60) it turned 40 m late: 16–21 m across the road for 50 s, 15–24 m, 52 s off the route."""
+    stood the fixes' test, so once its σ passes 10 m the map's road lines only hold it on the
+    road it runs along. By the 60° turn at 140 s it is 35–40 m ahead along the road; the
+    turn the gyros measured happened at the one junction within its σ, and the corner fix
+    says which: from 160 s to the window's end the error stays within 4.7–10.1 m (largest per
+    10 s). Without the corner (before stop 60) it turned 40 m late: 16–21 m across the road
+    for 50 s, 15–24 m, 52 s off the route."""
     from selfnav import campaigns
     from selfnav.sim.scenarios import simulate
 

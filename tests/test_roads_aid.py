@@ -279,6 +279,45 @@ def test_a_road_line_the_filter_is_further_from_than_another_is_no_constraint(
         assert abs(outs[0]["offset"] - toward * sep) < 0.05
 
 
+@pytest.mark.parametrize("cross_m, vouched, heading_deg, expected",
+                         [(2.0, False, 0.0, True), (25.0, False, 0.0, False),
+                          (25.0, True, 0.0, True), (2.0, False, 12.0, False)])
+def test_an_unvouched_dead_reckoning_is_held_on_its_road_not_moved_to_another(
+        helsinki, cross_m, vouched, heading_deg, expected):
+    """While an INS no dead reckoning of which has stood the fixes' test dead-reckons at σ
+    20 m (above ``dr_sigma_m``), a road line it heads along only holds it: 2 m across is
+    taken, 25 m across (more than its σ across the road) is not — such a pull put campaign
+    drive 8017652828310085427 on a road 100 m from the one driven — though a vouched INS
+    takes it; a line 12° off its heading is the next segment or a branch and is not taken.
+    Given no line at all, an unvouched dead reckoning drifted 5–10 m across its road in a
+    bend (campaign drive 4418772899228626032: 26 s off the route)."""
+    P = np.eye(15) * 400.0
+    P[8, 8] = np.radians(0.5) ** 2
+    aid, flt, _, _ = _filter_beside_a_straight(helsinki, np.full(400, 60.0), cross_m, P,
+                                               heading_off=np.radians(heading_deg))
+    aid.dead_reckoning, aid.ins_vouched = True, vouched
+    outs = aid.constraints(0.2, flt)
+    assert (len(outs) == 1) == expected, outs
+    if expected:
+        assert abs(outs[0]["offset"] - cross_m) < 0.05
+
+
+@pytest.mark.slow
+@pytest.mark.filterwarnings(                      # the start comes late in the drive
+    "ignore:.*covers .* of the truth's time span:selfnav.errors.SelfnavWarning")
+def test_a_bend_while_an_unvouched_ins_dead_reckons_stays_on_the_route():
+    """Simulated issue-19 campaign drive 4418772899228626032 (master seed 2, Kotka Karhula):
+    the start at 263 s, a 236 s Gauss–Markov window from 291 s — before any dead reckoning of
+    the INS stood the fixes' test. With no road line above σ 10 m the dead reckoning drifted
+    5–10 m across its road in a bend at 505–535 s, 26 s off the route; held on its road by
+    the lines it heads along, it is off for at most a few seconds."""
+    from selfnav import campaigns
+
+    row = campaigns.run_roadnav(4418772899228626032, dict(campaigns.ROADNAV_DEFAULTS))
+    assert row["off_route_s"] < 10.0, row["off_route_s"]
+    assert row["err_sigma_p95"] < 3.0, row["err_sigma_p95"]
+
+
 @pytest.mark.slow
 @pytest.mark.filterwarnings("ignore:.*covers .* of the truth's time span:selfnav.errors.SelfnavWarning")  # starts after alignment
 def test_consumer_ekf_with_the_map_through_an_outlier_window():

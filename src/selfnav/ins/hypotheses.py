@@ -487,23 +487,24 @@ class FaultBank:
         drift = self._innovation_drift() if settled else None
         if drift is not None:
             why, n = drift
-            # the fault began within the window: back to the youngest reference before it
+            # the fault began within the window: back to the youngest reference before it —
+            # from before twice the window where one stands: a drag grows from nothing, and
+            # the sums see only its grown part; one from within the window's length before
+            # it had taken the drag's first seconds and carried them with a σ that refused
+            # the road lines and the clean fixes after (campaign drive 4929174180326169418: a
+            # drag from 402.6 s found over 16 fixes at 430 s, M reset to the reference of
+            # 414 s, 14 m across its road at σ 5 m for 45 s; to the one of 398 s, 2 s off
+            # the route). None that old to go back to: the youngest before the window, as
+            # before (kept without one, M followed the drag: 6860796862989826794, 9 → 63 m)
             t_from = t - n * self.fix_dt
             self.flush()
             # (a fallback of the start's heading sum counts here: the sums find the drag, the
             # fallback is the sum from before it)
-            before = sorted((r for r in self.mature(t) + self.fallbacks
-                             if r.t0 <= t_from and t - r.t0 >= self.cfg.integrity.min_age_s),
-                            key=lambda r: r.t0)
-            if before and isinstance(before[-1], SumFallback) \
-                    and self.sum_choice_differs is not None:
-                # back to the youngest sum that held another heading hypothesis best than M
-                # is now, if the sum was undecided when the drag began (the drag may have
-                # chosen M's — the sums date a drag late); none such: M, with the fixes
-                # since, knows more than the sum then did (docs/ekf.md)
-                sums = [r for r in before if isinstance(r, SumFallback)
-                        and self.sum_choice_differs(r.hyp, t_from)]
-                before = sums[-1:]
+            before = []
+            for t_ref in (t - 2 * n * self.fix_dt, t_from):
+                before = self._references_before(t, t_ref, t_from)
+                if before:
+                    break
             if before:
                 ref = before[-1]
                 # the episode starts when the fault did (as far as the sums tell); M goes
@@ -557,6 +558,22 @@ class FaultBank:
             for q, age, lam in tested:
                 self.adapter.on_reference(t, q, age, lam)
         return Verdict(FixStatus.USED, "", nis, apply=True)
+
+    def _references_before(self, t, t_ref, t_from) -> list:
+        """The mature references and sum fallbacks branched by ``t_ref``, oldest first — or,
+        where the youngest is a fallback of the start's heading sum, only the youngest
+        fallback that held another heading hypothesis best than ``M`` is now, if the sum was
+        undecided when the drag began at ``t_from`` (the drag may have chosen M's — the sums
+        date a drag late); none such: M, with the fixes since, knows more than the sum then
+        did (docs/ekf.md)."""
+        before = sorted((r for r in self.mature(t) + self.fallbacks
+                         if r.t0 <= t_ref and t - r.t0 >= self.cfg.integrity.min_age_s),
+                        key=lambda r: r.t0)
+        if before and isinstance(before[-1], SumFallback) \
+                and self.sum_choice_differs is not None:
+            before = [r for r in before if isinstance(r, SumFallback)
+                      and self.sum_choice_differs(r.hyp, t_from)][-1:]
+        return before
 
     def _innovation_drift(self):
         """``(reason, n)`` if the recent whitened innovations have a mean: ``|Σ ν|² / n``

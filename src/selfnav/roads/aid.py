@@ -256,13 +256,15 @@ class EkfRoadAid:
         the cloud cannot tell the road the car is on from the one its dead reckoning drifted
         to (simulated drives: a map-aided dead reckoning 900 m off at σ 10 m)
     dr_sigma_m : while dead-reckoning with an INS no dead reckoning of which has yet stood the
-        fixes' test (``ins_vouched`` False), road constraints only below this horizontal σ, m
-        (a cloud that follows the dead reckoning can still tell the road while the filter is
-        sure to a tenth of the junction spacing; beyond, it takes the junction the drift picks:
-        simulated drives 300 m off at σ 10 m — the σ then a lie, issue 18); a vouched INS
-        keeps them up to ``max_sigma_m``, its heading checked against the road's. A corner fix
-        stands up to ``max_sigma_m`` either way: its own test finds the one junction of the
-        turn within the filter's σ
+        fixes' test (``ins_vouched`` False), road constraints that may move the filter only
+        below this horizontal σ, m (a cloud that follows the dead reckoning can still tell the
+        road while the filter is sure to a tenth of the junction spacing; beyond, it takes the
+        junction the drift picks: simulated drives 300 m off at σ 10 m — the σ then a lie,
+        issue 18); above it, up to ``max_sigma_m``, the road lines only *hold* the filter on
+        the road it runs along (:meth:`_holds`). A vouched INS keeps them all up to
+        ``max_sigma_m``, its heading checked against the road's. A corner fix stands up to
+        ``max_sigma_m`` either way: its own test finds the one junction of the turn within the
+        filter's σ
     q_along : (m/s)²/s, along-track speed variance added while the cloud judges GNSS
         unhealthy (:meth:`_widen_along`; None: off)
     doubt_radius_m, doubt_min_m : the map's doubt (:meth:`doubt`,
@@ -318,8 +320,8 @@ class EkfRoadAid:
         self.dr_sigma_m = dr_sigma_m
         self.line_agree = line_agree
         #: set by the navigator while the fixes are not taken (a fault episode, an outage):
-        #: the map then gives no constraint once the filter's σ is above ``dr_sigma_m``
-        #: (:meth:`constraints`)
+        #: the map then only holds an unvouched filter on its road once its σ is above
+        #: ``dr_sigma_m`` (:meth:`constraints`)
         self.dead_reckoning = False
         #: set by the navigator: since the start the fault bank has held a reference — a dead
         #: reckoning of the INS that has stood the fixes' test; before, its heading may be off
@@ -473,6 +475,17 @@ class EkfRoadAid:
                               < np.sin(np.radians(20.0)))
                            & (np.abs(off_j) < abs(off) - self.sigma_cross)
                            & (np.abs(off_j - off) >= 3.0 * self.sigma_cross)))
+
+    def _holds(self, out, P2) -> bool:
+        """Would road line or leg ``out`` only hold the filter on its road — its offset within
+        three ``sigma_cross`` or one of the filter's σ across the line — rather than move it to
+        another? (A line 68 m across at σ 27 m put campaign drive 8017652828310085427 on a
+        road 100 m from the one driven; the pulls of 4–12 m at σ 5–14 m across that kept
+        others on theirs, 4418772899228626032 and 5205673417576926403, are within it.)"""
+        n = np.asarray(out["normal_n"], float)
+        s_c = float(np.sqrt(max(n @ P2 @ n, 0.0)))
+        return out["kind"] in ("line", "leg") and \
+            abs(out["offset"]) <= max(3.0 * self.sigma_cross, s_c)
 
     def _agrees(self, dist, u, P2, spread=0.0):
         """The agreement test of the cloud and the filter: is ``dist`` (m, along unit vector
@@ -668,18 +681,20 @@ class EkfRoadAid:
         # up to ``max_sigma_m`` (campaign drive 6560021803722912080, a 118 s white window from
         # 101 s: the dead reckoning 40 m ahead at a 60° turn, 16–21 m across for 50 s without
         # it, 4 m along after it); ``max_sigma_m`` bounds it below
-        if self.dead_reckoning and sigma_h > self.dr_sigma_m and not self.ins_vouched \
-                and corner is None:
-            # the fixes are not taken (a fault episode, an outage) and no dead reckoning of this
-            # INS has yet stood the fixes' test: the cloud follows the dead reckoning and cannot
-            # vouch for a road once the filter is unsure — its lines, legs and arcs turned a
-            # filter onto the next road at a junction and made it sure of it (simulated drives:
-            # 300 m off at σ 10 m; campaign drive 8017652828310085427, a 192 s white window
-            # from 26 s: 148 m off without this). A vouched INS keeps the lines up to
-            # ``max_sigma_m``: they then need its heading to run along the road (below), which
-            # a wrong branch does not (stop 56: 8632296919476031792 was 5–7 m beside its road
-            # for 22 s at σ 12 m, its lines off)
-            return meas
+        # the fixes are not taken (a fault episode, an outage) and no dead reckoning of this
+        # INS has yet stood the fixes' test: the cloud follows the dead reckoning and cannot
+        # vouch for a road once the filter is unsure — its lines, legs and arcs turned a
+        # filter onto the next road at a junction and made it sure of it (simulated drives:
+        # 300 m off at σ 10 m; campaign drive 8017652828310085427, a 192 s white window from
+        # 26 s: 148 m off when they moved it). They may still *hold* it on the road it runs
+        # along (:meth:`_holds`): given nothing, a dead reckoning that had kept to its road
+        # for minutes drifted 5–10 m across it in a bend (campaign drive 4418772899228626032,
+        # 26 s off the route in a 236 s Gauss–Markov window started 28 s after the start).
+        # A vouched INS keeps the lines up to ``max_sigma_m``: they then need its heading to
+        # run along the road (below), which a wrong branch does not (stop 56:
+        # 8632296919476031792 was 5–7 m beside its road for 22 s at σ 12 m, its lines off)
+        hold_only = self.dead_reckoning and sigma_h > self.dr_sigma_m and not self.ins_vouched \
+            and corner is None
         if sigma_h > self.max_sigma_m:
             # the filter is too unsure of its position for the map to say which road it is on
             # (a cloud that follows its dead reckoning takes the junction its speed error
@@ -705,12 +720,12 @@ class EkfRoadAid:
             # heading (a consumer start 24° off at σ 3°): the fixes bound what a wrong one does
             # — and so while no dead reckoning of the INS has yet stood the fixes' test
             # (``ins_vouched``: that start's first episode came from its heading)
-            if not (self.dead_reckoning and self.ins_vouched) \
+            if not (self.dead_reckoning and (self.ins_vouched or hold_only)) \
                     or self._heading_agrees(est["seg"], hdg, flt):
                 a0, _, nrm = self._line(est["seg"])
                 out = {"normal_n": nrm, "offset": float((p_ins - a0) @ nrm), "kind": "line",
                        "heading": float(self.g.seg_heading[est["seg"]])}
-        elif legs is None and self.curve_sigma is not None:
+        elif legs is None and self.curve_sigma is not None and not hold_only:
             # a gentle curve (vertices below 20°): the car follows the centre line within
             # centimetres (a 12 m arc cuts a 10° vertex by 5 cm), but the heading changes
             # along it: cross-track only, looser
@@ -724,7 +739,7 @@ class EkfRoadAid:
                 a0, _, nrm = self._line(q)
                 out = {"normal_n": nrm, "offset": float((p_ins - a0) @ nrm), "kind": "leg",
                        "heading": float(self.g.seg_heading[q])}
-        elif legs is not None:
+        elif legs is not None and not hold_only:
             rr = self._corner_radii(legs)[2:]          # the first 0.4 s is the turn's entry
             if len(rr) >= 3 and np.subtract(*np.percentile(rr, [75, 25])) < 0.3 * np.median(rr):
                 R = float(np.median(rr))
@@ -736,7 +751,7 @@ class EkfRoadAid:
                         agree = 2.0 * self.sigma_arc
                     if abs(arc[1]) < agree:
                         out = {"normal_n": arc[0], "offset": arc[1], "kind": "arc"}
-        if out is None:
+        if out is None or (hold_only and not self._holds(out, P2)):
             return meas
         # the cloud and the filter disagree by more than the filter's own uncertainty allows:
         # one of them is on another road, or elsewhere on this one; constraining the filter
