@@ -480,8 +480,8 @@ class EkfRoadAid:
         """Would road line or leg ``out`` only hold the filter on its road — its offset within
         three ``sigma_cross`` or one of the filter's σ across the line — rather than move it to
         another? (A line 68 m across at σ 27 m put campaign drive 8017652828310085427 on a
-        road 100 m from the one driven; the pulls of 4–12 m at σ 5–14 m across that kept
-        others on theirs, 4418772899228626032 and 5205673417576926403, are within it.)"""
+        road 100 m from the one driven; the pulls of 4–9 m at σ 5–14 m across that kept
+        others on theirs, 5205673417576926403 and 5892921121329950675, are within it.)"""
         n = np.asarray(out["normal_n"], float)
         s_c = float(np.sqrt(max(n @ P2 @ n, 0.0)))
         return out["kind"] in ("line", "leg") and \
