@@ -500,11 +500,8 @@ class FaultBank:
             self.flush()
             # (a fallback of the start's heading sum counts here: the sums find the drag, the
             # fallback is the sum from before it)
-            before = []
-            for t_ref in (t - 2 * n * self.fix_dt, t_from):
-                before = self._references_before(t, t_ref, t_from)
-                if before:
-                    break
+            before = (self._references_before(t, t - 2 * n * self.fix_dt, t_from)
+                      or self._references_before(t, t_from, t_from))
             if before:
                 ref = before[-1]
                 # the episode starts when the fault did (as far as the sums tell); M goes

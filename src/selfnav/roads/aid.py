@@ -188,6 +188,11 @@ def _beyond_map(graph, xy, cover_m) -> bool:
     return len(xy) > 0 and _near_a_road(graph, xy, cover_m).sum() < 0.5 * len(xy)
 
 
+def _sigma_along(P2, u) -> float:
+    """The σ of horizontal covariance ``P2`` (2×2, m²) along unit vector ``u``, m."""
+    return float(np.sqrt(max(u @ P2 @ u, 0.0)))
+
+
 def _heading_of(C_nb):
     """True heading (rad, clockwise from North) of the forward axis of ``C_nb`` (DESIGN §2)."""
     fwd = C_nb[1]
@@ -477,21 +482,19 @@ class EkfRoadAid:
                            & (np.abs(off_j - off) >= 3.0 * self.sigma_cross)))
 
     def _holds(self, out, P2) -> bool:
-        """Would road line or leg ``out`` only hold the filter on its road — its offset within
-        three ``sigma_cross`` or one of the filter's σ across the line — rather than move it to
-        another? (A line 68 m across at σ 27 m put campaign drive 8017652828310085427 on a
+        """Would road line or leg ``out`` (the only kinds :meth:`constraints` forms then) only
+        hold the filter on its road — its offset within three ``sigma_cross`` or one of the
+        filter's σ across the line — rather than move it to another? (A line 68 m across at σ 27 m put campaign drive 8017652828310085427 on a
         road 100 m from the one driven; the pulls of 4–9 m at σ 5–14 m across that kept
         others on theirs, 5205673417576926403 and 5892921121329950675, are within it.)"""
-        n = np.asarray(out["normal_n"], float)
-        s_c = float(np.sqrt(max(n @ P2 @ n, 0.0)))
-        return out["kind"] in ("line", "leg") and \
-            abs(out["offset"]) <= max(3.0 * self.sigma_cross, s_c)
+        s_c = _sigma_along(P2, np.asarray(out["normal_n"], float))
+        return abs(out["offset"]) <= max(3.0 * self.sigma_cross, s_c)
 
     def _agrees(self, dist, u, P2, spread=0.0):
         """The agreement test of the cloud and the filter: is ``dist`` (m, along unit vector
         ``u``) within ``max(agree_m, 3σ)`` — σ the filter's along ``u`` (``P2``) with
         ``spread``, the cloud's?"""
-        s_u = math.hypot(float(np.sqrt(max(u @ P2 @ u, 0.0))), spread)
+        s_u = math.hypot(_sigma_along(P2, u), spread)
         return abs(dist) <= max(self.agree_m, 3.0 * s_u)
 
     def _cloud_agrees(self, est, p, P2):
@@ -745,7 +748,7 @@ class EkfRoadAid:
                 R = float(np.median(rr))
                 arc = self._arc(*legs, p_ins, R)
                 if arc is not None:
-                    sig_a = float(np.sqrt(max(arc[0] @ P2 @ arc[0], 0.0)))
+                    sig_a = _sigma_along(P2, arc[0])
                     agree = max(self.arc_agree_m, 2.0 * sig_a)
                     if not self._arc_placed(legs, R, sigma_h):
                         agree = 2.0 * self.sigma_arc
