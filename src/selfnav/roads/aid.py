@@ -484,9 +484,10 @@ class EkfRoadAid:
     def _holds(self, out, P2) -> bool:
         """Would road line or leg ``out`` (the only kinds :meth:`constraints` forms then) only
         hold the filter on its road — its offset within three ``sigma_cross`` or one of the
-        filter's σ across the line — rather than move it to another? (A line 68 m across at σ 27 m put campaign drive 8017652828310085427 on a
-        road 100 m from the one driven; the pulls of 4–9 m at σ 5–14 m across that kept
-        others on theirs, 5205673417576926403 and 5892921121329950675, are within it.)"""
+        filter's σ across the line — rather than move it to another? (A line 68 m across at
+        σ 27 m put campaign drive 8017652828310085427 on a road 100 m from the one driven; the
+        pulls of 4–9 m at σ 5–14 m across that kept others on theirs, 5205673417576926403 and
+        5892921121329950675, are within it.)"""
         s_c = _sigma_along(P2, np.asarray(out["normal_n"], float))
         return abs(out["offset"]) <= max(3.0 * self.sigma_cross, s_c)
 
