@@ -46,3 +46,29 @@ def test_ctrl_c_with_dask_workers_is_one_line(delay):
             os.killpg(p.pid, signal.SIGKILL)
     assert p.returncode == 130, err.decode()[-2000:]
     assert err.decode().strip() == "selfnav: interrupted" and out == b""
+
+
+def test_a_ctrl_c_while_the_fork_server_starts_is_not_lost():
+    """The Dask workers' fork server is started with SIGINT blocked, not ignored: a Ctrl-C in
+    that moment is delivered afterwards (ignored, it was discarded and the command went on
+    computing: a CI hang), and the server and the workers it forks keep SIGINT blocked."""
+    code = """if True:
+        import os, signal
+        import multiprocessing.forkserver as fs
+        from selfnav import cluster
+        start = fs.ensure_running
+        def ensure_running():
+            os.kill(os.getpid(), signal.SIGINT)  # the user's Ctrl-C, as the server starts
+            start()
+        fs.ensure_running = ensure_running
+        try:
+            cluster._start_forkserver_blocking_sigint()
+            print("lost")
+        except KeyboardInterrupt:
+            status = open(f"/proc/{fs._forkserver._forkserver_pid}/status").read()
+            mask = int(status.split("SigBlk:")[1].split()[0], 16)
+            print("interrupted", bool(mask & (1 << (signal.SIGINT - 1))))
+    """
+    r = subprocess.run([sys.executable, "-c", code], env=dict(os.environ, PYTHONPATH=str(SRC)),
+                       capture_output=True, text=True, timeout=60)
+    assert r.stdout.split() == ["interrupted", "True"], r.stderr[-2000:]

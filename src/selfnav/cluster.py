@@ -27,7 +27,11 @@ def make_client(workers: int, scheduler: str | None):
         except (OSError, TimeoutError) as e:
             raise SelfnavError(f"cannot reach the Dask scheduler at {scheduler}: {e}") from None
     cluster = local_cluster(workers)
-    return Client(cluster), cluster
+    try:
+        return Client(cluster), cluster
+    except BaseException:  # a Ctrl-C while the client connects: the cluster is ours to close
+        cluster.close()
+        raise
 
 
 def local_cluster(workers: int):
@@ -45,7 +49,7 @@ def local_cluster(workers: int):
     key = "MALLOC_TRIM_THRESHOLD_"
     saved = os.environ.pop(key, None)  # a nanny of an earlier cluster may have exported it
     try:
-        _start_forkserver_ignoring_sigint()
+        _start_forkserver_blocking_sigint()
         with dask.config.set({f"distributed.nanny.pre-spawn-environ.{key}": None,
                               "distributed.worker.multiprocessing-method": "forkserver"}):
             # no dashboard, and the scheduler's HTTP routes (health, metrics) on a free port:
@@ -55,26 +59,46 @@ def local_cluster(workers: int):
                                 dashboard_address=None,
                                 scheduler_kwargs={"dashboard_address": ":0"},
                                 silence_logs=logging.CRITICAL)
+    except BaseException:
+        # a Ctrl-C during the start-up leaves a half-started cluster to distributed's exit
+        # handlers; its scheduler went on starting and logged (INFO) after the cluster's own
+        # silencing had been undone. Keep distributed quiet for the rest of this process.
+        _silence_distributed()
+        raise
     finally:
         if saved is not None:
             os.environ[key] = saved
 
 
-def _start_forkserver_ignoring_sigint() -> None:
-    """Start multiprocessing's fork server with SIGINT ignored; the worker processes it forks
-    inherit that, so Ctrl-C reaches this process only, which then shuts the cluster down (no
-    traceback from every worker). Only the fork and exec of the server (milliseconds) run with
-    SIGINT ignored here: a Ctrl-C during the cluster's start-up is not lost."""
+def _silence_distributed() -> None:
+    # the logger, not its handlers: the half-started cluster restores its handlers' levels
+    # when distributed closes it at exit
+    logging.getLogger("distributed").setLevel(logging.CRITICAL)
+
+
+def _start_forkserver_blocking_sigint() -> None:
+    """Start multiprocessing's fork server with SIGINT blocked; the worker processes it forks
+    inherit the signal mask, so Ctrl-C reaches this process only, which then shuts the cluster
+    down (no traceback from every worker).
+
+    Blocked, not ignored: a Ctrl-C that arrives while the server is spawned stays pending and is
+    delivered here when the mask is restored. With SIGINT ignored for those milliseconds it was
+    discarded, and the command went on computing (seen once in CI, reproduced by a SIGINT sent
+    as the cluster starts)."""
     import multiprocessing.forkserver as fs
+    from multiprocessing import resource_tracker
 
     if threading.current_thread() is not threading.main_thread():
         fs.ensure_running()
         return
-    old = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    # the resource tracker first: its own start-up blocks SIGINT and then unblocks it, which
+    # inside the block below would have let the fork server start unprotected
+    resource_tracker.ensure_running()
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
     try:
         fs.ensure_running()
     finally:
-        signal.signal(signal.SIGINT, old)
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
 
 
 def results_as_completed(futures, poll_s: float = 0.05):
