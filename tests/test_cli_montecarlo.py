@@ -54,6 +54,7 @@ def test_a_ctrl_c_while_the_fork_server_starts_is_not_lost():
     computing: a CI hang), and the server and the workers it forks keep SIGINT blocked."""
     code = """if True:
         import os, signal
+        signal.signal(signal.SIGINT, signal.default_int_handler)  # pytest-xdist ignores it
         import multiprocessing.forkserver as fs
         from selfnav import cluster
         start = fs.ensure_running

@@ -302,69 +302,6 @@ def test_an_unvouched_dead_reckoning_is_held_on_its_road_not_moved_to_another(
         assert abs(outs[0]["offset"] - cross_m) < 0.05
 
 
-def _gentle_bend(g, lo=np.radians(3.0), hi=np.radians(15.0), min_len=30.0):
-    """A directed segment whose one way on within 20° bends by lo..hi, both at least min_len."""
-    off, succ = successor_table(g)
-    for s in range(g.n_segments):
-        on = [int(q) for q in succ[off[s]:off[s + 1]]
-              if abs(float(wrap(g.seg_heading[q] - g.seg_heading[s]))) < np.radians(20.0)]
-        if len(on) == 1 and min(g.seg_len[s], g.seg_len[on[0]]) > min_len \
-                and lo < abs(float(wrap(g.seg_heading[on[0]] - g.seg_heading[s]))) < hi:
-            return s, on[0]
-    raise AssertionError("no gentle bend on the map")
-
-
-def test_a_line_holds_only_along_its_segment(helsinki):
-    """The cloud 5 m before the end of a segment, the filter 35 m past it on the way on, which
-    bends by a few degrees, at σ 20 m: the line is the way on's, at the filter's offset from
-    it (0), not the first segment's extended (its offset 35 m · sin of the bend — a constraint
-    across it is one along the road, to where the two lines meet: campaign drive
-    902665947756418351 was pulled 54 m back and lost). Short of the end, or at a branch, no
-    way on is taken for the segment."""
-    from selfnav import attitude as att
-
-    g = helsinki
-    s, q = _gentle_bend(g)
-    aid, flt, _, _ = _filter_beside_a_straight(g, np.full(400, g.seg_len[s] - 5.0), 0.0,
-                                               np.eye(15) * 400.0, s=s)
-    d = np.array([np.sin(g.seg_heading[q]), np.cos(g.seg_heading[q])])
-    p = g.xy[g.seg_u[q]] + 35.0 * d
-    flt.ins.lat, flt.ins.lon = (float(v) for v in g.to_geodetic(p[0], p[1]))
-    flt.ins.C_nb = att.dcm_nb_from_euler(0.0, 0.0, g.seg_heading[q])
-    outs = aid.constraints(0.2, flt)
-    assert len(outs) == 1, outs
-    assert abs(outs[0]["offset"]) < 0.05 and outs[0]["heading"] == pytest.approx(g.seg_heading[q])
-    assert aid._segment_at(s, p) == q and aid._segment_at(q, g.xy[g.seg_u[q]] - 30.0 * d) == s
-    assert aid._segment_at(s, g.xy[g.seg_u[s]] + 3.0 * (p - g.xy[g.seg_u[s]]) / 80.0) == s
-
-
-@pytest.mark.parametrize("tilt_deg, offset_m", [(0.0, 4.0), (1.5, 2.5), (4.6, 4.2), (7.0, -1.0)])
-def test_a_road_line_moves_the_filter_along_its_road_no_more_than_its_offset(helsinki, tilt_deg,
-                                                                             offset_m):
-    """A filter held on one line (σ 20 m along, 0.3 m across) given a line ``tilt_deg`` from
-    it, ``offset_m`` across: the update at the line's σ floor moves it along the line by at
-    most max(2 m, |offset|) (the Kalman gain, by hand); without the floor, 4.2 m at 4.6° moved
-    it 28 m (campaign drive 902665947756418351). Along the filter's own axis: no floor."""
-    aid, _, _, _ = _filter_beside_a_straight(helsinki, np.full(10, 60.0), 0.0, np.eye(15))
-    th = np.radians(tilt_deg)
-    a = np.array([np.cos(th), np.sin(th)])                  # the filter's long axis
-    c = np.array([-a[1], a[0]])
-    P2 = 20.0 ** 2 * np.outer(a, a) + 0.3 ** 2 * np.outer(c, c)
-    n, d = np.array([0.0, 1.0]), np.array([1.0, 0.0])       # the line along x, normal y
-    out = {"normal_n": n, "offset": offset_m, "kind": "line"}
-    floor = aid._sigma_floor(out, P2)
-    sigma = max(aid.sigma_cross, floor)
-    along = float(d @ P2 @ n) * offset_m / (float(n @ P2 @ n) + sigma ** 2)
-    assert abs(along) <= max(2.0, abs(offset_m)) + 1e-9
-    if tilt_deg == 0.0:
-        assert floor == 0.0
-    else:
-        assert abs(along) == pytest.approx(max(2.0, abs(offset_m)), rel=1e-9)
-    if tilt_deg == 4.6:
-        bare = float(d @ P2 @ n) * offset_m / (float(n @ P2 @ n) + aid.sigma_cross ** 2)
-        assert abs(bare) > 20.0
-
-
 @pytest.mark.slow
 @pytest.mark.filterwarnings(                      # the start comes late in the drive
     "ignore:.*covers .* of the truth's time span:selfnav.errors.SelfnavWarning")
@@ -380,22 +317,6 @@ def test_a_bend_while_an_unvouched_ins_dead_reckons_stays_on_the_route():
     assert row["off_route_s"] < 10.0, row["off_route_s"]
     assert row["err_sigma_p95"] < 3.0, row["err_sigma_p95"]
 
-
-@pytest.mark.slow
-@pytest.mark.filterwarnings(
-    "ignore:.*covers .* of the truth's time span:selfnav.errors.SelfnavWarning")
-def test_a_dead_reckoning_ahead_of_its_cloud_is_not_pulled_back_by_the_cloud_s_segment():
-    """Simulated issue-19 campaign drive 902665947756418351 (master seed 103): a 277 s drift
-    from 130 s. Dead-reckoning at σ 15–18 m, 4 m from the truth, its cloud 30–50 m behind it:
-    the lines of the cloud's segments (the next 4.6° from the last), taken where the filter
-    lay 30–50 m beyond their ends, pulled it 28 m back in one update and 54 m in four, and the
-    bank then restarted on the drifting fixes (93 s off the route, 78 m RMS). With the line of
-    the segment beside the filter it stays on the route."""
-    from selfnav import campaigns
-
-    row = campaigns.run_roadnav(902665947756418351, dict(campaigns.ROADNAV_DEFAULTS))
-    assert row["off_route_s"] < 10.0, row["off_route_s"]
-    assert row["horizontal_rms_m"] < 10.0, row["horizontal_rms_m"]
 
 @pytest.mark.slow
 @pytest.mark.filterwarnings("ignore:.*covers .* of the truth's time span:selfnav.errors.SelfnavWarning")  # starts after alignment

@@ -34,9 +34,6 @@ P_FAR_NOMINAL = 0.06
 #: costs a start 30 s later): 5 of 40 allowed — at 1 %, 6 and 7 of 40, two drifts from
 #: power-on were started on (tests/test_roads_aid.py); the old fixed 15 % share allowed 6
 ALPHA_START_CHECK = 0.05
-#: a road line may move the filter along its road by its own offset, and by this much (m),
-#: before its σ is widened (:meth:`EkfRoadAid._sigma_floor`)
-ALONG_PULL_M = 2.0
 
 
 def far_allowed(n: int, p_far: float = P_FAR_NOMINAL, alpha: float = ALPHA_START_CHECK) -> int:
@@ -316,7 +313,6 @@ class EkfRoadAid:
         self.seg_cur = -1
         self.history = []      # (t, x, y, seg, spread, line share)
         self.corner = self._corner_nodes()
-        self.pred = self._predecessors()
         self.counts = {"line": 0, "leg": 0, "arc": 0, "curve": 0, "grade": 0,
                        "corner": 0, "dr_corner": 0}
         self.curve_sigma = curve_sigma
@@ -450,45 +446,7 @@ class EkfRoadAid:
         start_bend[succ[end_bend[src]]] = True
         return end_bend, start_bend
 
-    def _predecessors(self) -> list:
-        """Per segment, the segments the cloud moves onto it from (the inverse of its
-        successors)."""
-        off, succ = self.pf.off, self.pf.succ
-        src = np.repeat(np.arange(self.g.n_segments), np.diff(off))
-        pred = [[] for _ in range(self.g.n_segments)]
-        for a, b in zip(src.tolist(), succ.tolist()):
-            pred[b].append(a)
-        return pred
-
     # ------------------------------------------------------------------ geometry
-    def _segment_at(self, s, p, tol=2.0, steps=8):
-        """The segment of ``s``'s road that point ``p`` lies beside: ``s``, or the way on
-        along the road (the one successor, or predecessor, within 20° of its heading) where
-        ``p`` lies beyond ``s``'s end (start) by more than ``tol`` m; None where the road
-        bends or branches there.
-
-        A segment's line holds only along the segment: beyond its end, on a road that turns
-        by a few degrees, a constraint across the line is one along the road — where the
-        line meets the one the filter was held on (simulated campaign drive
-        902665947756418351: the cloud 30–50 m behind a dead reckoning that was 4 m from the
-        truth; the lines of its segments, 4.6° apart, pulled the filter 28 m back in one
-        update and 54 m in four, and it was lost)."""
-        g, off, succ = self.g, self.pf.off, self.pf.succ
-        for _ in range(steps):
-            a0, d, _ = self._line(s)
-            u = float((p - a0) @ d)
-            if u > g.seg_len[s] + tol:
-                nxt = succ[off[s]:off[s + 1]]
-            elif u < -tol:
-                nxt = np.asarray(self.pred[s], np.int64)
-            else:
-                return int(s)
-            on = nxt[np.abs(wrap(g.seg_heading[nxt] - g.seg_heading[s])) < np.radians(20.0)]
-            if len(on) != 1:
-                return None
-            s = int(on[0])
-        return None
-
     def _line(self, s):
         """Start point, direction and right normal of directed segment ``s``."""
         h = float(self.g.seg_heading[s])
@@ -539,26 +497,6 @@ class EkfRoadAid:
         ``spread``, the cloud's?"""
         s_u = math.hypot(_sigma_along(P2, u), spread)
         return abs(dist) <= max(self.agree_m, 3.0 * s_u)
-
-    def _sigma_floor(self, out, P2) -> float:
-        """The least σ (m) of road line ``out`` (a line, leg or curve) for which it moves the
-        filter along its road by no more than its offset across it, or ``ALONG_PULL_M``.
-
-        A line constrains the position across the road. Where the filter's long axis (a dead
-        reckoning held on another line) lies a few degrees from it, an offset across it is a
-        pull along the road, to where the two lines meet: as far as ``offset / sin(angle)``.
-        Over the filter's σ along, the road's lines differ by that much — a model error of the
-        line's, not news of where along it the filter is (simulated campaign drive
-        902665947756418351: 4.2 m off a line 4.6° from the axis moved a filter 4 m from the
-        truth 28 m back in one update, 54 m in four, and it was lost; 8746736602586311441:
-        lines 1.5° apart and 2.5 m across pulled one 50 m back in 20 s; stop 46 saw it at 7°,
-        :meth:`_cloud_agrees`). Refusing such lines instead left the second to drift 8 m
-        across its road."""
-        n = np.asarray(out["normal_n"], float)
-        d = np.array([-n[1], n[0]])
-        off = float(out["offset"])
-        need = abs(float(d @ P2 @ n) * off) / max(ALONG_PULL_M, abs(off)) - float(n @ P2 @ n)
-        return math.sqrt(max(need, 0.0))
 
     def _cloud_agrees(self, est, p, P2):
         """Is the cloud's mean ``est["xy"]`` within :meth:`_agrees` of the filter at ``p``,
@@ -786,25 +724,22 @@ class EkfRoadAid:
             # heading (a consumer start 24° off at σ 3°): the fixes bound what a wrong one does
             # — and so while no dead reckoning of the INS has yet stood the fixes' test
             # (``ins_vouched``: that start's first episode came from its heading)
-            q = self._segment_at(est["seg"], p_ins)
-            if q is not None and (not (self.dead_reckoning and (self.ins_vouched or hold_only))
-                                  or self._heading_agrees(q, hdg, flt)):
-                a0, _, nrm = self._line(q)
+            if not (self.dead_reckoning and (self.ins_vouched or hold_only)) \
+                    or self._heading_agrees(est["seg"], hdg, flt):
+                a0, _, nrm = self._line(est["seg"])
                 out = {"normal_n": nrm, "offset": float((p_ins - a0) @ nrm), "kind": "line",
-                       "heading": float(self.g.seg_heading[q])}
+                       "heading": float(self.g.seg_heading[est["seg"]])}
         elif legs is None and self.curve_sigma is not None and not hold_only:
             # a gentle curve (vertices below 20°): the car follows the centre line within
             # centimetres (a 12 m arc cuts a 10° vertex by 5 cm), but the heading changes
             # along it: cross-track only, looser
-            q = self._segment_at(est["seg"], p_ins)
-            if q is not None:
-                a0, _, nrm = self._line(q)
-                out = {"normal_n": nrm, "offset": float((p_ins - a0) @ nrm), "kind": "curve"}
+            a0, _, nrm = self._line(est["seg"])
+            out = {"normal_n": nrm, "offset": float((p_ins - a0) @ nrm), "kind": "curve"}
         elif legs is not None and not turning:
             # on one of the straight legs of a corner: the one the INS heading matches
             dh = [abs(float(wrap(self.g.seg_heading[q] - hdg))) for q in legs]
-            q = self._segment_at(legs[int(np.argmin(dh))], p_ins)
-            if q is not None and self._heading_agrees(q, hdg, flt):
+            q = legs[int(np.argmin(dh))]
+            if self._heading_agrees(q, hdg, flt):
                 a0, _, nrm = self._line(q)
                 out = {"normal_n": nrm, "offset": float((p_ins - a0) @ nrm), "kind": "leg",
                        "heading": float(self.g.seg_heading[q])}
@@ -843,21 +778,20 @@ class EkfRoadAid:
             if n_r @ np.array([np.cos(hdg), -np.sin(hdg)]) < 0:
                 n_r = -n_r
             self.lock = (t, n_r)
-        floor = self._sigma_floor(out, P2) if out["kind"] != "arc" else 0.0
         kind = out.pop("kind")
         self.counts[kind] += 1
         if kind == "arc":
             out["sigma"] = self.sigma_arc
             return meas + [out]
         if kind == "curve":
-            out["sigma"] = max(self.curve_sigma, floor)
+            out["sigma"] = self.curve_sigma
             return meas + [out]
         # the cloud's own spread across the line: the weight it leaves on other roads (a
         # divided road's other carriageway, a parallel street) is the chance the line is the
         # wrong one (simulated campaign drive 8234251124038289217: 80 % of the cloud on a
         # road 8 m from the truth, the constraint at σ 1 m held the filter there at σ 2.3 m)
         off_c = (pos - p_ins) @ out["normal_n"] + out["offset"]
-        out["sigma"] = max(float(np.hypot(self.sigma_cross, np.sqrt(w @ off_c**2))), floor)
+        out["sigma"] = float(np.hypot(self.sigma_cross, np.sqrt(w @ off_c**2)))   # w sums to 1
         if self.sigma_heading is None:
             del out["heading"]
         else:
