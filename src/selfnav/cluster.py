@@ -62,18 +62,13 @@ def local_cluster(workers: int):
     except BaseException:
         # a Ctrl-C during the start-up leaves a half-started cluster to distributed's exit
         # handlers; its scheduler went on starting and logged (INFO) after the cluster's own
-        # silencing had been undone. Keep distributed quiet for the rest of this process.
-        _silence_distributed()
+        # silencing had been undone. Keep distributed quiet for the rest of this process: its
+        # logger, not its handlers, whose levels the half-started cluster restores at exit
+        logging.getLogger("distributed").setLevel(logging.CRITICAL)
         raise
     finally:
         if saved is not None:
             os.environ[key] = saved
-
-
-def _silence_distributed() -> None:
-    # the logger, not its handlers: the half-started cluster restores its handlers' levels
-    # when distributed closes it at exit
-    logging.getLogger("distributed").setLevel(logging.CRITICAL)
 
 
 def _start_forkserver_blocking_sigint() -> None:
